@@ -1,0 +1,264 @@
+// Composition of the stages of DESIGN.md (paper §§5-9). Every stage runs before any output is
+// written, and outputs are staged and renamed into place, so a failed run leaves nothing behind.
+#include "app/pipeline.h"
+
+#include <tbb/global_control.h>
+#include <unistd.h>
+
+#include <chrono>
+#include <cmath>
+#include <cstdio>
+#include <filesystem>
+#include <fstream>
+#include <iomanip>
+#include <iostream>
+#include <nlohmann/json.hpp>
+#include <optional>
+#include <sstream>
+
+#include "io/image.h"
+#include "io/mesh_io.h"
+#include "io/output_dir.h"
+#include "mesh/errors.h"
+#include "mesh/shapes.h"
+#include "mesh/transfer.h"
+#include "solver/gradient.h"
+
+namespace morphmap {
+namespace {
+
+using Clock = std::chrono::steady_clock;
+double seconds_since(Clock::time_point start) { return std::chrono::duration<double>(Clock::now() - start).count(); }
+
+// Similarity x -> (x - center) / scale that brings a surface into the common morph frame.
+struct Frame {
+  Eigen::Vector3d center = Eigen::Vector3d::Zero();
+  double scale = 1.0;
+  Eigen::MatrixXd to_world(const Eigen::MatrixXd& P) const {
+    return (P * scale).rowwise() + center.transpose();
+  }
+};
+
+Frame normalise(Surface& surface) {
+  const Eigen::AlignedBox3d box = bounding_box(surface.V);
+  Frame frame;
+  frame.center = box.center();
+  frame.scale = 0.5 * box.sizes().maxCoeff();
+  surface.V = (surface.V.rowwise() - frame.center.transpose()) / frame.scale;
+  return frame;
+}
+
+class Progress {
+ public:
+  explicit Progress(bool enabled) : enabled_(enabled), start_(Clock::now()) {}
+  void stage(const std::string& name, double seconds) const {
+    if (enabled_) std::fprintf(stderr, "[morphmap] %-10s %8.3f s  (elapsed %.1f s)\n", name.c_str(), seconds, seconds_since(start_));
+  }
+ private:
+  bool enabled_;
+  Clock::time_point start_;
+};
+
+std::string format_time(double t) {
+  std::ostringstream s;
+  s << std::setprecision(6) << t;
+  return s.str();
+}
+
+void load_inputs(const PipelineOptions& options, Surface& A, Surface& B) {
+  const bool a_builtin = is_builtin_shape(options.source), b_builtin = is_builtin_shape(options.target);
+  // Parse both specs first so that a bad spec is reported before any file is read.
+  std::optional<ShapeSpec> a_spec, b_spec;
+  if (a_builtin) a_spec = parse_shape_spec(options.source);
+  if (b_builtin) b_spec = parse_shape_spec(options.target);
+  if (!b_builtin) B = read_surface(options.target);
+  if (!a_builtin) A = read_surface(options.source);
+  if (b_builtin) B = make_shape(*b_spec, a_builtin ? std::nullopt : std::optional(bounding_box(A.V)));
+  if (a_builtin) A = make_shape(*a_spec, std::optional(bounding_box(B.V)));
+  validate_surface(A, true);
+  validate_surface(B, true);
+}
+
+void write_labels(const std::string& path, const Eigen::MatrixXd& labels) {
+  std::ofstream out(path);
+  if (!out) throw IoError(path + ": cannot open for writing");
+  out << std::setprecision(17);
+  for (Eigen::Index i = 0; i < labels.rows(); ++i) out << labels(i, 0) << ' ' << labels(i, 1) << ' ' << labels(i, 2) << '\n';
+  if (!out) throw IoError(path + ": write failed");
+}
+
+}  // namespace
+
+PipelineResult run_pipeline(const PipelineOptions& options) {
+  const auto start_total = Clock::now();
+  std::optional<tbb::global_control> threads;
+  if (options.threads > 0) threads.emplace(tbb::global_control::max_allowed_parallelism, std::size_t(options.threads));
+  if (options.align != "none" && options.align != "bbox")
+    throw InvalidInput("--align: unknown value '" + options.align + "' (choose none, bbox)");
+  for (double t : options.slices)
+    if (!(t > 0.0 && t < 1.0)) throw InvalidInput("--slices: time " + format_time(t) + " is not in (0, 1)");
+  (void)make_solver(options.laplace.solver, options.laplace.solve);  // rejects an unknown backend before any work
+
+  Progress progress(options.progress);
+  nlohmann::json report;
+  nlohmann::json& seconds = report["seconds"];
+
+  auto start = Clock::now();
+  Surface A, B;
+  load_inputs(options, A, B);
+  Frame frame_a, frame_b;
+  if (options.align == "bbox") {
+    frame_a = normalise(A);
+    frame_b = normalise(B);
+  }
+  seconds["load"] = seconds_since(start);
+  progress.stage("load", seconds["load"]);
+
+  const MorphResult morph = build_morph(A, B, options.morph);
+  seconds["morph"] = morph.seconds;
+  progress.stage("morph", morph.seconds);
+
+  ExtractResult extract = extract_hypersurface(morph.field, options.extract);
+  seconds["extract"] = extract.seconds;
+  progress.stage("extract", extract.seconds);
+  const TetMesh4& mesh = extract.mesh;
+
+  const LaplaceResult laplace = solve_harmonic(mesh, options.laplace);
+  seconds["laplace"] = laplace.seconds;
+  progress.stage("laplace", laplace.seconds);
+
+  const GradientResult gradient = compute_gradient(mesh, laplace.s);
+  seconds["gradient"] = gradient.seconds;
+  progress.stage("gradient", gradient.seconds);
+
+  start = Clock::now();
+  const SurfaceLocator locator(A);
+  const double locator_seconds = seconds_since(start);
+  const TransportResult transport = transport_labels(
+      mesh, laplace.s, gradient.vertex_field, [&](const Eigen::Vector3d& x) { return locator.closest(x).point; },
+      options.transport);
+  seconds["transport"] = transport.seconds;
+  progress.stage("transport", transport.seconds);
+
+  start = Clock::now();
+  PipelineResult result;
+  result.target = target_boundary(mesh, transport.labels);
+  const std::vector<SurfaceHit> hits = locator.closest_all(result.target.labels);
+  seconds["map"] = seconds_since(start) + locator_seconds;
+  progress.stage("map", seconds["map"]);
+
+  start = Clock::now();
+  if (A.has_uv()) result.target_uv = uv_at(A, hits);
+  struct SliceOut {
+    double t;
+    SliceMesh mesh;
+    Eigen::MatrixXd uv;
+  };
+  std::vector<SliceOut> slices;
+  for (double t : options.slices) {
+    SliceOut s{t, slice_at(mesh, transport.labels, t), {}};
+    if (A.has_uv()) s.uv = uv_at(A, locator.closest_all(s.mesh.labels));
+    slices.push_back(std::move(s));
+  }
+  seconds["transfer"] = seconds_since(start);
+  progress.stage("transfer", seconds["transfer"]);
+
+  result.target_labels = frame_a.to_world(points_of(hits));
+  const Eigen::MatrixXd target_positions = frame_b.to_world(result.target.V);
+  result.mesh_vertices = mesh.vertex_count();
+  result.mesh_tets = mesh.tet_count();
+  result.fallbacks = transport.fallbacks();
+
+  report["inputs"] = {{"source", options.source}, {"target", options.target}};
+  report["options"] = {{"voxels", options.morph.voxels},
+                       {"voxel_size", morph.field.voxel_size},
+                       {"padding", options.morph.padding},
+                       {"time_steps", options.extract.time_steps},
+                       {"time_scale", mesh.time_scale},
+                       {"zero_snap", options.extract.zero_snap},
+                       {"solver", options.laplace.solver},
+                       {"tolerance", options.laplace.solve.tolerance},
+                       {"max_iterations", options.laplace.solve.max_iterations},
+                       {"warm_start", options.laplace.warm_start},
+                       {"align", options.align},
+                       {"slices", options.slices},
+                       {"threads", options.threads},
+                       {"output_dir", options.output_dir}};
+  report["counts"] = {{"vertices", mesh.vertex_count()},
+                      {"tets", mesh.tet_count()},
+                      {"target_vertices", result.target.V.rows()},
+                      {"target_triangles", result.target.F.rows()},
+                      {"source_vertices", A.V.rows()},
+                      {"source_triangles", A.F.rows()},
+                      {"lattice_points", morph.lattice_points},
+                      {"lattice_dims", {morph.field.dims.x(), morph.field.dims.y(), morph.field.dims.z()}}};
+  report["extract"] = {{"active_cells", extract.active_cells},
+                       {"prisms", extract.prisms},
+                       {"snapped_values", extract.snapped_values},
+                       {"degenerate_tets", extract.degenerate_tets},
+                       {"min_volume_ratio", extract.min_volume_ratio}};
+  report["solver"] = {{"name", laplace.report.backend},
+                      {"iterations", laplace.report.iterations},
+                      {"residual", laplace.report.residual},
+                      {"unknowns", laplace.unknowns},
+                      {"setup_seconds", laplace.report.setup_seconds},
+                      {"solve_seconds", laplace.report.solve_seconds},
+                      {"assemble_seconds", laplace.assemble_seconds},
+                      {"floating_components", laplace.floating_components},
+                      {"floating_vertices", laplace.floating_vertices}};
+  report["transport"] = {{"fallbacks", transport.fallbacks()},
+                         {"upwind_exact", transport.upwind_exact},
+                         {"fallback_projected", transport.fallback_projected},
+                         {"fallback_neighbours", transport.fallback_neighbours},
+                         {"fallback_unreached", transport.fallback_unreached}};
+
+  if (!options.output_dir.empty()) {
+    start = Clock::now();
+    OutputDir out(options.output_dir);
+    std::string mtl_name;
+    if (A.has_uv() && A.has_texture()) {
+      std::string texture_name = "texture.png";
+      if (A.texture) {
+        write_png(out.staged(texture_name), *A.texture);
+      } else {
+        texture_name = "texture" + std::filesystem::path(A.texture_path).extension().string();
+        std::error_code ec;
+        std::filesystem::copy_file(A.texture_path, out.staged(texture_name),
+                                   std::filesystem::copy_options::overwrite_existing, ec);
+        if (ec) throw IoError(A.texture_path + ": cannot copy texture (" + ec.message() + ")");
+      }
+      mtl_name = "target.mtl";
+      write_mtl(out.staged(mtl_name), texture_name);
+    }
+    const TriIndices no_fuv;
+    write_obj(out.staged("target.obj"), target_positions, result.target.F, result.target_uv, no_fuv, mtl_name);
+    if (options.write_ply) write_ply(out.staged("target.ply"), target_positions, result.target.F, result.target_uv);
+    write_labels(out.staged("labels.txt"), result.target_labels);
+    nlohmann::json slice_report = nlohmann::json::array();
+    for (const SliceOut& s : slices) {
+      // Intermediate shapes live between A's and B's frames; interpolate the similarity.
+      Frame frame;
+      frame.center = (1.0 - s.t) * frame_a.center + s.t * frame_b.center;
+      frame.scale = (1.0 - s.t) * frame_a.scale + s.t * frame_b.scale;
+      const std::string name = "slice_" + format_time(s.t) + ".obj";
+      write_obj(out.staged(name), frame.to_world(s.mesh.V), s.mesh.F, s.uv, no_fuv, mtl_name);
+      slice_report.push_back({{"t", s.t}, {"file", name}, {"vertices", s.mesh.V.rows()}, {"triangles", s.mesh.F.rows()}});
+    }
+    report["slices"] = slice_report;
+    seconds["write"] = seconds_since(start);
+    seconds["total"] = seconds_since(start_total);
+    report["peak_memory_bytes"] = peak_memory_bytes();
+    result.report_json = report.dump(2);
+    std::ofstream(out.staged("report.json")) << result.report_json << '\n';
+    out.commit({"report.json"});
+    progress.stage("write", seconds["write"]);
+  } else {
+    seconds["write"] = 0.0;
+    seconds["total"] = seconds_since(start_total);
+    report["peak_memory_bytes"] = peak_memory_bytes();
+    result.report_json = report.dump(2);
+  }
+  return result;
+}
+
+}  // namespace morphmap

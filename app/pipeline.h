@@ -1,0 +1,45 @@
+// The whole pipeline of DESIGN.md composed: load -> morph -> extract -> laplace -> gradient ->
+// transport -> map -> transfer -> outputs (paper §§5-9).
+#pragma once
+
+#include <string>
+#include <vector>
+
+#include "mesh/extract.h"
+#include "mesh/morph.h"
+#include "mesh/slice.h"
+#include "solver/laplace.h"
+#include "solver/transport.h"
+
+namespace morphmap {
+
+struct PipelineOptions {
+  std::string source;              ///< mesh file or built-in shape spec (see mesh/shapes.h)
+  std::string target;              ///< mesh file or built-in shape spec
+  std::string output_dir;          ///< outputs go here (created if missing); empty = compute only
+  std::string align = "none";      ///< "none": meshes in their own coordinates; "bbox": both normalised to a unit box
+  MorphOptions morph;              ///< lattice resolution
+  ExtractOptions extract;          ///< time steps, time scale
+  LaplaceOptions laplace;          ///< solver backend and tolerance
+  TransportOptions transport;      ///< upwind sweep tolerances
+  std::vector<double> slices;      ///< morph times in (0, 1) at which to write slice_<t>.obj
+  bool write_ply = false;          ///< also write target.ply
+  int threads = 0;                 ///< worker threads; 0 = all cores
+  bool progress = false;           ///< print stage names and times to stderr
+};
+
+struct PipelineResult {
+  std::string report_json;          ///< the report.json text (also written to output_dir)
+  SliceMesh target;                 ///< B as extracted (t = 1 boundary), in B's coordinates; labels raw
+  Eigen::MatrixXd target_labels;    ///< #target.V by 3: preimage on A (closest point of A to the raw label), A's coordinates
+  Eigen::MatrixXd target_uv;        ///< #target.V by 2 texture coordinates; empty when A has no UVs
+  std::int64_t mesh_vertices = 0;   ///< vertices of the 4D tet mesh
+  std::int64_t mesh_tets = 0;
+  std::int64_t fallbacks = 0;       ///< transport fallbacks
+};
+
+/// Runs every stage and writes the outputs (target.obj, labels.txt, slices, report.json) atomically
+/// into options.output_dir. Throws InvalidInput / IoError / TopologyError / SolverError.
+PipelineResult run_pipeline(const PipelineOptions& options);
+
+}  // namespace morphmap

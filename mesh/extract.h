@@ -1,0 +1,31 @@
+// Extraction of the hypersurface d(x, t) = 0 in R^4 as tetrahedra (paper §5.2): hypercubes of the
+// space-time lattice split into 24 Kuhn (Freudenthal) pentatopes, marching pentatopes inside.
+#pragma once
+
+#include <cstdint>
+
+#include "mesh/morph.h"
+#include "mesh/tet_mesh4.h"
+
+namespace morphmap {
+
+struct ExtractOptions {
+  int time_steps = 16;          ///< K: lattice intervals along t in [0, 1]
+  double time_scale = 0.0;      ///< c (length per unit t); <= 0 selects the default c = K * h (cubic lattice cells)
+  double zero_snap = 1e-3;      ///< |d| below zero_snap * h is moved to +zero_snap * h so no crossing lands on a lattice point
+};
+
+struct ExtractResult {
+  TetMesh4 mesh;
+  double seconds = 0.0;
+  std::int64_t active_cells = 0;      ///< 4D hypercubes with a sign change
+  std::int64_t snapped_values = 0;    ///< values of dA and dB within zero_snap of zero (moved off zero)
+  std::int64_t prisms = 0;            ///< pentatopes cut in a prism (2|3 split), 3 tets each
+  std::int64_t degenerate_tets = 0;   ///< tets of (near) zero volume kept in the mesh
+  double min_volume_ratio = 0.0;      ///< smallest tet volume / mean tet volume
+};
+
+/// Extracts the tetrahedral mesh; throws TopologyError when the morph has no zero crossing.
+ExtractResult extract_hypersurface(const MorphField& field, const ExtractOptions& options);
+
+}  // namespace morphmap

@@ -1,0 +1,44 @@
+// Distance-field morph d(x, t) = (1 - t) dA(x) + t dB(x) (Payne and Toga 1992; paper §5.1),
+// sampled on a regular lattice. OpenVDB builds the signed distance grids; their values are then
+// kept as dense lattice arrays so that no other translation unit includes OpenVDB.
+#pragma once
+
+#include <Eigen/Core>
+#include <Eigen/Geometry>
+#include <cstdint>
+#include <vector>
+
+#include "mesh/surface.h"
+
+namespace morphmap {
+
+struct MorphOptions {
+  int voxels = 64;              ///< lattice voxels across the larger side of the union bounding box
+  double voxel_size = 0.0;      ///< explicit voxel size h; overrides `voxels` when > 0
+  int padding = 2;              ///< voxels of margin around the union bounding box (d > 0 there)
+};
+
+/// Signed distances of A and B (negative inside) on the lattice points origin + h * (i, j, k).
+/// Distances are exact over the whole lattice box, not clamped to a narrow band, because the
+/// morph's zero set runs over the symmetric difference of the solids, far from either surface.
+struct MorphField {
+  Eigen::Vector3d origin = Eigen::Vector3d::Zero();  ///< world position of lattice point (0, 0, 0)
+  double voxel_size = 0.0;                            ///< h
+  Eigen::Vector3i dims = Eigen::Vector3i::Zero();     ///< lattice points along x, y, z
+  std::vector<float> dA;  ///< dims.prod() values, x fastest: index = i + dims.x * (j + dims.y * k)
+  std::vector<float> dB;  ///< same layout as dA
+
+  std::int64_t index(int i, int j, int k) const { return i + std::int64_t(dims.x()) * (j + std::int64_t(dims.y()) * k); }
+  Eigen::Vector3d point(int i, int j, int k) const { return origin + voxel_size * Eigen::Vector3d(i, j, k); }
+};
+
+struct MorphResult {
+  MorphField field;
+  double seconds = 0.0;          ///< wall time of the stage
+  std::int64_t lattice_points = 0;
+};
+
+/// Builds dA and dB on a lattice covering both (closed, manifold) surfaces plus padding.
+MorphResult build_morph(const Surface& A, const Surface& B, const MorphOptions& options);
+
+}  // namespace morphmap

@@ -1,0 +1,63 @@
+// Closed triangle surfaces: the inputs A and B of the morph (DESIGN.md, stage "load"), their
+// validation and bounding boxes.
+#pragma once
+
+#include <Eigen/Core>
+#include <Eigen/Geometry>
+#include <cstdint>
+#include <memory>
+#include <string>
+#include <vector>
+
+namespace morphmap {
+
+/// 8-bit RGB image, rows top to bottom, `pixels.size() == 3 * width * height`.
+struct RgbImage {
+  int width = 0;
+  int height = 0;
+  std::vector<std::uint8_t> pixels;
+};
+
+/// A triangle surface with optional per-corner texture coordinates.
+/// Faces are counter-clockwise seen from outside (outward normals).
+struct Surface {
+  Eigen::MatrixXd V;   ///< #V by 3 vertex positions
+  Eigen::MatrixXi F;   ///< #F by 3 vertex indices per triangle
+  Eigen::MatrixXd UV;  ///< #UV by 2 texture coordinates; empty when the surface has none
+  Eigen::MatrixXi FUV; ///< #F by 3 indices into UV per triangle corner; empty when UV is empty
+  std::string texture_path;                    ///< image file named by the MTL (map_Kd), empty if none
+  std::shared_ptr<const RgbImage> texture;     ///< in-memory texture (built-in shapes), null if none
+  std::string name;                            ///< file path or built-in spec, used in messages
+
+  bool has_uv() const { return UV.rows() > 0 && FUV.rows() == F.rows(); }
+  bool has_texture() const { return texture != nullptr || !texture_path.empty(); }
+};
+
+/// Edge-based topology facts of a triangle surface.
+struct SurfaceCheck {
+  std::int64_t boundary_edges = 0;        ///< edges used by exactly one face
+  std::int64_t nonmanifold_edges = 0;     ///< edges used by more than two faces
+  std::int64_t inconsistent_edges = 0;    ///< edges whose two faces traverse them in the same direction
+  std::int64_t degenerate_faces = 0;      ///< faces with a repeated vertex index
+  std::int64_t nonmanifold_vertices = 0;  ///< vertices whose incident faces form more than one fan
+  bool closed() const { return boundary_edges == 0; }
+  bool manifold() const { return nonmanifold_edges == 0 && nonmanifold_vertices == 0 && degenerate_faces == 0; }
+};
+
+/// Counts boundary, non-manifold and inconsistently oriented edges. Indices must be in range.
+SurfaceCheck check_surface(const Eigen::MatrixXi& F, std::int64_t vertex_count);
+
+/// Throws InvalidInput ("<name>: <problem>") unless the surface is non-empty, finite, has face indices
+/// in range, and (when `require_closed`) is closed and manifold.
+void validate_surface(const Surface& surface, bool require_closed);
+
+/// Axis-aligned bounding box of the vertices.
+Eigen::AlignedBox3d bounding_box(const Eigen::MatrixXd& V);
+
+/// Signed volume enclosed by a closed surface (positive when faces are outward).
+double signed_volume(const Eigen::MatrixXd& V, const Eigen::MatrixXi& F);
+
+/// Total area of the triangles.
+double surface_area(const Eigen::MatrixXd& V, const Eigen::MatrixXi& F);
+
+}  // namespace morphmap

@@ -1,0 +1,45 @@
+// Texture transfer (paper §8.2): a label (a point of A) becomes a texture coordinate through the
+// closest point of A's original mesh and its barycentric interpolation of the corner UVs.
+#pragma once
+
+#include <Eigen/Core>
+#include <memory>
+#include <vector>
+
+#include "mesh/surface.h"
+
+namespace morphmap {
+
+/// Closest point on a triangle surface.
+struct SurfaceHit {
+  Eigen::Vector3d point = Eigen::Vector3d::Zero();  ///< closest point on the surface
+  int face = -1;                                    ///< triangle of the surface holding it
+  Eigen::Vector3d barycentric = Eigen::Vector3d::Zero();  ///< weights of the face's three corners
+  double distance = 0.0;
+};
+
+/// Closest-point queries on a fixed surface (CGAL AABB tree), safe to call from many threads.
+class SurfaceLocator {
+ public:
+  explicit SurfaceLocator(const Surface& surface);
+  ~SurfaceLocator();
+  SurfaceLocator(const SurfaceLocator&) = delete;
+  SurfaceLocator& operator=(const SurfaceLocator&) = delete;
+
+  SurfaceHit closest(const Eigen::Vector3d& query) const;
+  /// One hit per row of Q (#Q by 3), TBB-parallel, order preserved.
+  std::vector<SurfaceHit> closest_all(const Eigen::MatrixXd& Q) const;
+
+ private:
+  struct Impl;
+  std::unique_ptr<Impl> impl_;
+};
+
+/// Texture coordinates at the hits: #hits by 2, interpolated from the hit face's corner UVs.
+/// Requires surface.has_uv().
+Eigen::MatrixXd uv_at(const Surface& surface, const std::vector<SurfaceHit>& hits);
+
+/// Points of the hits: #hits by 3.
+Eigen::MatrixXd points_of(const std::vector<SurfaceHit>& hits);
+
+}  // namespace morphmap

@@ -1,0 +1,20 @@
+// Gradient field T = grad s on the tetrahedral mesh in R^4 (paper §6.2), with the affine least-norm
+// form instead of the paper's linear 4x4 system: grad s = E (E^T E)^-1 [s1 - s0, s2 - s0, s3 - s0]^T.
+#pragma once
+
+#include <Eigen/Core>
+
+#include "mesh/tet_mesh4.h"
+
+namespace morphmap {
+
+struct GradientResult {
+  Eigen::MatrixXd tet_gradient;     ///< #T by 4, gradient of s in each tet (lies in the tet's hull)
+  Eigen::MatrixXd vertex_field;     ///< #V by 4, volume-weighted mean of incident tet gradients, unit length (0 where undefined)
+  Eigen::VectorXd tet_volume;       ///< #T 3-volumes
+  double seconds = 0.0;
+};
+
+GradientResult compute_gradient(const TetMesh4& mesh, const Eigen::VectorXd& s);
+
+}  // namespace morphmap

@@ -1,0 +1,53 @@
+// Laplace-Beltrami operator on the tetrahedral 3-manifold in R^4 and the harmonic field s with
+// s = 0 on A and s = 1 on B (paper §6.1, equation 4 in its 3D cotangent form).
+#pragma once
+
+#include <Eigen/Core>
+#include <cstdint>
+#include <string>
+
+#include "mesh/tet_mesh4.h"
+#include "solver/linear_solver.h"
+
+namespace morphmap {
+
+/// Edge frame of tet t: E = [v1 - v0, v2 - v0, v3 - v0] (4 by 3), the inverse of its Gram matrix E^T E and
+/// the 3-volume sqrt(det E^T E) / 6. Returns false (volume 0, gram_inverse unset) for a degenerate tet, one
+/// whose det E^T E is at rounding level relative to the product of its squared edge lengths: such a tet
+/// has no usable hull and every stage skips it.
+bool tet_frame(const Eigen::MatrixXd& V, const TetIndices& T, Eigen::Index t, Eigen::Matrix<double, 4, 3>& E,
+               Eigen::Matrix3d& gram_inverse, double& volume);
+
+/// Barycentric gradients and volumes of every tet, computed in the tet's own 3D hull from the Gram
+/// matrix of its edge vectors (no 3D embedding needed).
+/// G: #T*4 by 4, row 4*t + i is the gradient (in R^4) of the hat function of T(t, i). vol: #T.
+/// Degenerate tets (see tet_frame) get zero gradients and zero volume, so they contribute nothing.
+void barycentric_gradients(const Eigen::MatrixXd& V, const TetIndices& T, Eigen::MatrixXd& G, Eigen::VectorXd& vol);
+
+/// P1 stiffness matrix K = sum over tets of vol * G_t^T G_t (#V by #V, symmetric positive semidefinite,
+/// rows sum to zero). Off-diagonals equal -(1/6) l_kl cot(theta_kl) summed over tets of edge ij.
+/// Assembly is TBB-parallel with per-thread triplet buffers merged in a fixed order.
+SparseMatrixD cotangent_stiffness(const Eigen::MatrixXd& V, const TetIndices& T);
+
+struct LaplaceOptions {
+  std::string solver = "cholmod";  ///< backend name for make_solver
+  SolveOptions solve;              ///< tolerance and iteration limit of iterative backends
+  bool warm_start = true;          ///< iterative backends start from s = t instead of 0
+};
+
+struct LaplaceResult {
+  Eigen::VectorXd s;                 ///< #V harmonic field, 0 on A, 1 on B
+  SolveReport report;                ///< backend diagnostics
+  std::int64_t unknowns = 0;         ///< interior vertices solved for
+  std::int64_t floating_components = 0;   ///< components touching neither A nor B: s set to their mean t
+  std::int64_t floating_vertices = 0;
+  std::int64_t degenerate_tets = 0;  ///< zero-volume tets left out of the operator (see tet_frame)
+  double assemble_seconds = 0.0;
+  double seconds = 0.0;              ///< whole stage
+};
+
+/// Solves the Dirichlet problem. Components with no boundary vertex would make the system singular:
+/// they are detected, excluded from the solve, and get s = their mean morph time (counted).
+LaplaceResult solve_harmonic(const TetMesh4& mesh, const LaplaceOptions& options);
+
+}  // namespace morphmap
