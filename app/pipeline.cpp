@@ -191,6 +191,7 @@ PipelineResult run_pipeline(const PipelineOptions& options) {
                       {"source_vertices", A.V.rows()},
                       {"source_triangles", A.F.rows()},
                       {"lattice_points", morph.lattice_points},
+                      {"exact_distance_queries", morph.exact_queries},
                       {"lattice_dims", {morph.field.dims.x(), morph.field.dims.y(), morph.field.dims.z()}}};
   report["extract"] = {{"active_cells", extract.active_cells},
                        {"prisms", extract.prisms},

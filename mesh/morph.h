@@ -16,11 +16,13 @@ struct MorphOptions {
   int voxels = 64;              ///< lattice voxels across the larger side of the union bounding box
   double voxel_size = 0.0;      ///< explicit voxel size h; overrides `voxels` when > 0
   int padding = 2;              ///< voxels of margin around the union bounding box (d > 0 there)
+  double band = 3.0;            ///< OpenVDB narrow-band half width in voxels; exact distances are filled in beyond it
 };
 
 /// Signed distances of A and B (negative inside) on the lattice points origin + h * (i, j, k).
-/// Distances are exact over the whole lattice box, not clamped to a narrow band, because the
-/// morph's zero set runs over the symmetric difference of the solids, far from either surface.
+/// Signs are right everywhere; distances are exact at every corner of a cube where d can change sign
+/// for some t (near the surfaces and over the symmetric difference of the solids) and clamped to
+/// +-band voxels elsewhere, where they cannot influence the zero set.
 struct MorphField {
   Eigen::Vector3d origin = Eigen::Vector3d::Zero();  ///< world position of lattice point (0, 0, 0)
   double voxel_size = 0.0;                            ///< h
@@ -36,6 +38,7 @@ struct MorphResult {
   MorphField field;
   double seconds = 0.0;          ///< wall time of the stage
   std::int64_t lattice_points = 0;
+  std::int64_t exact_queries = 0;  ///< closest-point queries made beyond the narrow band
 };
 
 /// Builds dA and dB on a lattice covering both (closed, manifold) surfaces plus padding.

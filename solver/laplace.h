@@ -26,7 +26,8 @@ void barycentric_gradients(const Eigen::MatrixXd& V, const TetIndices& T, Eigen:
 
 /// P1 stiffness matrix K = sum over tets of vol * G_t^T G_t (#V by #V, symmetric positive semidefinite,
 /// rows sum to zero). Off-diagonals equal -(1/6) l_kl cot(theta_kl) summed over tets of edge ij.
-/// Assembly is TBB-parallel with per-thread triplet buffers merged in a fixed order.
+/// Assembly is TBB-parallel over fixed chunks of tets, each writing its own slice of one triplet buffer in
+/// chunk order, so K is bitwise the same for any thread count.
 SparseMatrixD cotangent_stiffness(const Eigen::MatrixXd& V, const TetIndices& T);
 
 struct LaplaceOptions {

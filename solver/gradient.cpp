@@ -1,0 +1,91 @@
+// Tangent field T = grad s on the tetrahedral 3-manifold in R^4 (paper §6.2). The paper's equation 5 fits a
+// linear function through the origin; we fit the affine one inside each tet's hull instead,
+// grad s = E (E^T E)^-1 [s1 - s0, s2 - s0, s3 - s0]^T, which is exact for affine s and independent of where
+// the origin lies. Vertex values are the volume-weighted average of the incident tets, as in the paper.
+#include "solver/gradient.h"
+
+#include <tbb/parallel_for.h>
+
+#include <Eigen/Dense>
+#include <chrono>
+#include <cmath>
+#include <sstream>
+#include <vector>
+
+#include "mesh/errors.h"
+#include "solver/laplace.h"
+
+namespace morphmap {
+namespace {
+
+// A vertex whose weighted sum is this small relative to the sum of the magnitudes it came from sits where
+// the gradients cancel (an extremum or saddle of s): it has no direction, and normalising rounding noise
+// would invent one.
+constexpr double kCancellationRatio = 1e-12;
+
+}  // namespace
+
+GradientResult compute_gradient(const TetMesh4& mesh, const Eigen::VectorXd& s) {
+  const auto start = std::chrono::steady_clock::now();
+  const Eigen::MatrixXd& V = mesh.V;
+  const TetIndices& T = mesh.T;
+  const Eigen::Index n = V.rows();
+  const Eigen::Index tets = T.rows();
+  if (V.cols() != 4) throw InvalidInput("compute_gradient: vertex array must have 4 columns (x, y, z, tau)");
+  if (s.size() != n) {
+    std::ostringstream msg;
+    msg << "compute_gradient: s has " << s.size() << " entries for " << n << " vertices";
+    throw InvalidInput(msg.str());
+  }
+  if (tets > 0 && (T.minCoeff() < 0 || T.maxCoeff() >= n)) {
+    throw InvalidInput("compute_gradient: tet vertex index out of range");
+  }
+
+  GradientResult result;
+  result.tet_gradient.setZero(tets, 4);
+  result.tet_volume.setZero(tets);
+  tbb::parallel_for(Eigen::Index(0), tets, [&](Eigen::Index t) {
+    Eigen::Matrix<double, 4, 3> E;
+    Eigen::Matrix3d gram_inverse;
+    double volume = 0.0;
+    // Degenerate tets have no hull to take a gradient in: zero gradient, zero weight.
+    if (!tet_frame(V, T, t, E, gram_inverse, volume)) return;
+    const Eigen::Vector3d ds(s(T(t, 1)) - s(T(t, 0)), s(T(t, 2)) - s(T(t, 0)), s(T(t, 3)) - s(T(t, 0)));
+    result.tet_gradient.row(t) = (E * (gram_inverse * ds)).transpose();
+    result.tet_volume(t) = volume;
+  });
+
+  // Vertex -> tet adjacency in CSR, filled in tet order, so each vertex sums its tets in one fixed order
+  // whatever the thread count.
+  std::vector<Eigen::Index> offset(static_cast<std::size_t>(n) + 1, 0);
+  for (Eigen::Index t = 0; t < tets; ++t) {
+    for (int k = 0; k < 4; ++k) ++offset[static_cast<std::size_t>(T(t, k)) + 1];
+  }
+  for (Eigen::Index i = 0; i < n; ++i) offset[static_cast<std::size_t>(i) + 1] += offset[static_cast<std::size_t>(i)];
+  std::vector<Eigen::Index> incident(static_cast<std::size_t>(offset.back()));
+  {
+    std::vector<Eigen::Index> cursor(offset.begin(), offset.end() - 1);
+    for (Eigen::Index t = 0; t < tets; ++t) {
+      for (int k = 0; k < 4; ++k) incident[static_cast<std::size_t>(cursor[static_cast<std::size_t>(T(t, k))]++)] = t;
+    }
+  }
+
+  result.vertex_field.setZero(n, 4);
+  tbb::parallel_for(Eigen::Index(0), n, [&](Eigen::Index i) {
+    Eigen::RowVector4d sum = Eigen::RowVector4d::Zero();
+    double magnitude = 0.0;
+    for (Eigen::Index k = offset[static_cast<std::size_t>(i)]; k < offset[static_cast<std::size_t>(i) + 1]; ++k) {
+      const Eigen::Index t = incident[static_cast<std::size_t>(k)];
+      const double w = result.tet_volume(t);
+      sum += w * result.tet_gradient.row(t);
+      magnitude += w * result.tet_gradient.row(t).norm();
+    }
+    const double norm = sum.norm();
+    if (norm > kCancellationRatio * magnitude && std::isfinite(norm)) result.vertex_field.row(i) = sum / norm;
+  });
+
+  result.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+  return result;
+}
+
+}  // namespace morphmap

@@ -1,0 +1,134 @@
+// The `morphmap` command as a user meets it: bad input exits 2 with one line naming the problem and
+// writes nothing; the demo writes every output.
+#include <gtest/gtest.h>
+#include <sys/wait.h>
+
+#include <array>
+#include <cstdio>
+#include <filesystem>
+#include <fstream>
+#include <nlohmann/json.hpp>
+#include <string>
+
+namespace fs = std::filesystem;
+
+namespace {
+
+struct CommandRun {
+  int status = -1;
+  std::string output;  // stdout and stderr
+};
+
+CommandRun run_command(const std::string& args) {
+  const std::string command = std::string(MORPHMAP_BINARY) + " " + args + " 2>&1";
+  CommandRun r;
+  FILE* pipe = popen(command.c_str(), "r");
+  if (!pipe) return r;
+  std::array<char, 4096> buffer{};
+  while (fgets(buffer.data(), int(buffer.size()), pipe)) r.output += buffer.data();
+  const int raw = pclose(pipe);
+  r.status = WIFEXITED(raw) ? WEXITSTATUS(raw) : -1;
+  return r;
+}
+
+class Cli : public ::testing::Test {
+ protected:
+  void SetUp() override {
+    dir_ = fs::temp_directory_path() / ("morphmap_cli_" + std::to_string(::getpid()) + "_" +
+                                        ::testing::UnitTest::GetInstance()->current_test_info()->name());
+    fs::remove_all(dir_);
+    fs::create_directories(dir_);
+  }
+  void TearDown() override { fs::remove_all(dir_); }
+  std::string write(const std::string& name, const std::string& text) {
+    const fs::path p = dir_ / name;
+    std::ofstream(p) << text;
+    return p.string();
+  }
+  // Runs `map` with a bad input and checks status 2, one line naming `needle`, and no output.
+  void expect_rejected(const std::string& args, const std::string& needle) {
+    const fs::path out = dir_ / "out";
+    const CommandRun r = run_command("map " + args + " -o " + out.string() + " --voxels 16 --time-steps 4");
+    EXPECT_EQ(r.status, 2) << r.output;
+    EXPECT_NE(r.output.find(needle), std::string::npos) << r.output;
+    EXPECT_EQ(std::count(r.output.begin(), r.output.end(), '\n'), 1) << r.output;
+    EXPECT_FALSE(fs::exists(out)) << "output directory was created";
+  }
+  fs::path dir_;
+};
+
+const char* kTetraOff = "OFF\n4 4 0\n0 0 0\n1 0 0\n0 1 0\n0 0 1\n3 0 2 1\n3 0 1 3\n3 0 3 2\n3 1 2 3\n";
+
+TEST_F(Cli, MissingFile) { expect_rejected((dir_ / "nope.obj").string() + " sphere", "nope.obj"); }
+
+TEST_F(Cli, EmptyMesh) {
+  const std::string p = write("empty.off", "OFF\n0 0 0\n");
+  expect_rejected(p + " sphere", "empty.off");
+}
+
+TEST_F(Cli, NonFiniteCoordinate) {
+  const std::string p = write("nan.off", "OFF\n4 4 0\n0 0 0\n1 0 0\n0 nan 0\n0 0 1\n3 0 2 1\n3 0 1 3\n3 0 3 2\n3 1 2 3\n");
+  expect_rejected("sphere " + p, "nan.off");
+}
+
+TEST_F(Cli, FaceIndexOutOfRange) {
+  const std::string p = write("range.off", "OFF\n4 4 0\n0 0 0\n1 0 0\n0 1 0\n0 0 1\n3 0 2 1\n3 0 1 3\n3 0 3 9\n3 1 2 3\n");
+  expect_rejected(p + " sphere", "range.off");
+}
+
+TEST_F(Cli, NotClosed) {
+  const std::string p = write("open.off", "OFF\n4 3 0\n0 0 0\n1 0 0\n0 1 0\n0 0 1\n3 0 2 1\n3 0 1 3\n3 0 3 2\n");
+  expect_rejected(p + " sphere", "not closed");
+}
+
+TEST_F(Cli, NotManifold) {
+  // Two tetrahedra sharing one vertex only: closed, but the shared vertex is not manifold.
+  const std::string p = write("bowtie.off",
+                              "OFF\n7 8 0\n0 0 0\n1 0 0\n0 1 0\n0 0 1\n-1 0 0\n0 -1 0\n0 0 -1\n"
+                              "3 0 2 1\n3 0 1 3\n3 0 3 2\n3 1 2 3\n3 0 4 5\n3 0 6 4\n3 0 5 6\n3 4 6 5\n");
+  expect_rejected(p + " sphere", "not manifold");
+}
+
+TEST_F(Cli, UnknownOptionValues) {
+  const std::string p = write("tet.off", kTetraOff);
+  expect_rejected("sphere torus --solver magic", "magic");
+  expect_rejected("sphere torus --align sideways", "sideways");
+  expect_rejected("sphere torus --slices 1.5", "1.5");
+  expect_rejected("cube torus", "cube");
+  expect_rejected("sphere:radius=2 torus", "radius");
+}
+
+TEST_F(Cli, HelpOnEveryCommand) {
+  for (const char* cmd : {"--help", "map --help", "demo --help"}) {
+    const CommandRun r = run_command(cmd);
+    EXPECT_EQ(r.status, 0) << cmd;
+    EXPECT_NE(r.output.find("--"), std::string::npos) << cmd;
+  }
+}
+
+TEST_F(Cli, DemoWritesEveryOutput) {
+  const fs::path out = dir_ / "demo";
+  const CommandRun r = run_command("demo -o " + out.string() + " --voxels 20 --time-steps 5 --threads 2");
+  ASSERT_EQ(r.status, 0) << r.output;
+  for (const char* name : {"target.obj", "target.mtl", "texture.png", "labels.txt", "report.json", "slice_0.25.obj",
+                           "slice_0.5.obj", "slice_0.75.obj"})
+    EXPECT_TRUE(fs::exists(out / name)) << name;
+  const nlohmann::json report = nlohmann::json::parse(std::ifstream(out / "report.json"));
+  for (const char* key : {"vertices", "tets", "target_vertices", "target_triangles"})
+    EXPECT_GT(report["counts"][key].get<std::int64_t>(), 0) << key;
+  EXPECT_EQ(report["solver"]["name"], "cholmod");
+  EXPECT_TRUE(report["transport"].contains("fallbacks"));
+  EXPECT_GT(report["peak_memory_bytes"].get<std::int64_t>(), 0);
+  // labels.txt has one line per vertex of target.obj.
+  std::ifstream obj(out / "target.obj"), labels(out / "labels.txt");
+  std::string line;
+  std::int64_t vertices = 0, label_lines = 0;
+  while (std::getline(obj, line)) vertices += line.rfind("v ", 0) == 0;
+  while (std::getline(labels, line)) ++label_lines;
+  EXPECT_EQ(vertices, report["counts"]["target_vertices"].get<std::int64_t>());
+  EXPECT_EQ(label_lines, vertices);
+  for (const auto& entry : fs::directory_iterator(out))
+    EXPECT_EQ(entry.path().filename().string().rfind(".staging", 0), std::string::npos) << "staging left behind";
+}
+
+}  // namespace

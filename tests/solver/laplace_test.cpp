@@ -1,0 +1,306 @@
+// Tests of the cotangent Laplace-Beltrami operator and the harmonic field s (paper §6.1).
+#include "solver/laplace.h"
+
+#include <gtest/gtest.h>
+#include <tbb/global_control.h>
+
+#include <Eigen/Dense>
+#include <cmath>
+#include <cstring>
+#include <random>
+#include <string>
+#include <vector>
+
+#include "mesh/errors.h"
+#include "tests/solver/test_meshes.h"
+
+namespace morphmap {
+namespace {
+
+/// A slab bent out of its 3-plane and turned by a random rotation: every tet has its own hull.
+TetMesh4 curved_slab(int n, int nz, unsigned seed) {
+  TetMesh4 mesh = test::make_slab_mesh(n, nz);
+  test::perturb_interior(mesh, 0.3 / n, seed);
+  test::transform_embedding(mesh, test::random_rotation(seed + 1), Eigen::Vector4d(0.5, -2.0, 1.0, 3.0));
+  return mesh;
+}
+
+Eigen::VectorXd expected_linear(const TetMesh4& flat) { return flat.V.col(3) / flat.time_scale; }
+
+TEST(LaplaceStiffness, SymmetricWithZeroRowSums) {
+  const TetMesh4 mesh = curved_slab(4, 5, 11);
+  const SparseMatrixD K = cotangent_stiffness(mesh.V, mesh.T);
+  ASSERT_EQ(K.rows(), mesh.V.rows());
+  const Eigen::MatrixXd D = Eigen::MatrixXd(K);
+  const double scale = D.cwiseAbs().maxCoeff();
+  EXPECT_LE((D - D.transpose()).cwiseAbs().maxCoeff(), 1e-15 * scale);
+  EXPECT_LE((K * Eigen::VectorXd::Ones(K.cols())).cwiseAbs().maxCoeff(), 1e-13 * scale);
+  EXPECT_GT(D.diagonal().minCoeff(), 0.0);
+  // Positive semidefinite with the constants as the only null direction (the mesh is connected).
+  const Eigen::SelfAdjointEigenSolver<Eigen::MatrixXd> eigen(D);
+  EXPECT_GT(eigen.eigenvalues()(0), -1e-12 * scale);
+  EXPECT_GT(eigen.eigenvalues()(1), 1e-6 * scale);
+}
+
+TEST(LaplaceStiffness, EqualsDenseSumOverTets) {
+  const TetMesh4 mesh = curved_slab(3, 2, 5);
+  Eigen::MatrixXd G;
+  Eigen::VectorXd vol;
+  barycentric_gradients(mesh.V, mesh.T, G, vol);
+  ASSERT_EQ(G.rows(), 4 * mesh.T.rows());
+  ASSERT_EQ(G.cols(), 4);
+  Eigen::MatrixXd dense = Eigen::MatrixXd::Zero(mesh.V.rows(), mesh.V.rows());
+  for (Eigen::Index t = 0; t < mesh.T.rows(); ++t) {
+    const Eigen::Matrix4d Gt = G.middleRows<4>(4 * t);  // row i: gradient of hat i
+    const Eigen::Matrix4d Ke = vol(t) * Gt * Gt.transpose();
+    for (int i = 0; i < 4; ++i) {
+      for (int j = 0; j < 4; ++j) dense(mesh.T(t, i), mesh.T(t, j)) += Ke(i, j);
+    }
+  }
+  const Eigen::MatrixXd K = Eigen::MatrixXd(cotangent_stiffness(mesh.V, mesh.T));
+  EXPECT_LE((K - dense).cwiseAbs().maxCoeff(), 1e-13 * dense.cwiseAbs().maxCoeff());
+}
+
+TEST(LaplaceStiffness, BarycentricGradientsAreHatGradients) {
+  const TetMesh4 mesh = curved_slab(2, 2, 7);
+  Eigen::MatrixXd G;
+  Eigen::VectorXd vol;
+  barycentric_gradients(mesh.V, mesh.T, G, vol);
+  for (Eigen::Index t = 0; t < mesh.T.rows(); ++t) {
+    Eigen::Matrix<double, 4, 3> E;
+    const Eigen::Vector4d v0 = mesh.V.row(mesh.T(t, 0)).transpose();
+    for (int k = 0; k < 3; ++k) E.col(k) = mesh.V.row(mesh.T(t, k + 1)).transpose() - v0;
+    // Volume independently: |cross4| is the 3-volume of the parallelepiped.
+    EXPECT_NEAR(vol(t), cross4(E.col(0), E.col(1), E.col(2)).norm() / 6.0, 1e-14);
+    const Eigen::Matrix<double, 4, 3> Q = Eigen::HouseholderQR<Eigen::Matrix<double, 4, 3>>(E).householderQ() *
+                                          Eigen::Matrix<double, 4, 3>::Identity();
+    for (int i = 0; i < 4; ++i) {
+      const Eigen::Vector4d g = G.row(4 * t + i).transpose();
+      EXPECT_LE((g - Q * (Q.transpose() * g)).norm(), 1e-10 * g.norm());  // lies in the hull
+      for (int j = 1; j < 4; ++j) {
+        // hat_i(v_j) - hat_i(v_0) = delta_ij - delta_i0
+        const double expected = (i == j ? 1.0 : 0.0) - (i == 0 ? 1.0 : 0.0);
+        EXPECT_NEAR(g.dot(E.col(j - 1)), expected, 1e-11);
+      }
+    }
+  }
+}
+
+TEST(LaplaceStiffness, OffDiagonalIsCotangentWeight) {
+  std::mt19937 rng(2024);
+  std::normal_distribution<double> normal(0.0, 1.0);
+  for (int trial = 0; trial < 20; ++trial) {
+    Eigen::MatrixXd V(4, 4);
+    for (int r = 0; r < 4; ++r) {
+      for (int c = 0; c < 4; ++c) V(r, c) = normal(rng);
+    }
+    TetIndices T(1, 4);
+    T << 0, 1, 2, 3;
+    const Eigen::MatrixXd K = Eigen::MatrixXd(cotangent_stiffness(V, T));
+
+    // Independent route: orthonormal 3D coordinates of the hull, outward face normals by cross products.
+    Eigen::Matrix<double, 4, 3> E;
+    for (int k = 0; k < 3; ++k) E.col(k) = (V.row(k + 1) - V.row(0)).transpose();
+    const Eigen::Matrix<double, 4, 3> Q = Eigen::HouseholderQR<Eigen::Matrix<double, 4, 3>>(E).householderQ() *
+                                          Eigen::Matrix<double, 4, 3>::Identity();
+    std::vector<Eigen::Vector3d> p(4);
+    for (int m = 0; m < 4; ++m) p[static_cast<std::size_t>(m)] = Q.transpose() * (V.row(m) - V.row(0)).transpose();
+    for (int i = 0; i < 4; ++i) {
+      for (int j = i + 1; j < 4; ++j) {
+        int kl[2], c = 0;
+        for (int m = 0; m < 4; ++m) {
+          if (m != i && m != j) kl[c++] = m;
+        }
+        const Eigen::Vector3d& pk = p[static_cast<std::size_t>(kl[0])];
+        const Eigen::Vector3d& pl = p[static_cast<std::size_t>(kl[1])];
+        const Eigen::Vector3d& pi = p[static_cast<std::size_t>(i)];
+        const Eigen::Vector3d& pj = p[static_cast<std::size_t>(j)];
+        Eigen::Vector3d n_i = (pl - pk).cross(pi - pk);  // face (k, l, i), outward = away from j
+        if (n_i.dot(pj - pk) > 0.0) n_i = -n_i;
+        Eigen::Vector3d n_j = (pl - pk).cross(pj - pk);  // face (k, l, j), outward = away from i
+        if (n_j.dot(pi - pk) > 0.0) n_j = -n_j;
+        const double theta = std::acos(-1.0) - std::acos(n_i.normalized().dot(n_j.normalized()));
+        const double expected = -(pl - pk).norm() / (6.0 * std::tan(theta));
+        EXPECT_NEAR(K(i, j), expected, 1e-10 * (1.0 + std::abs(expected))) << "trial " << trial << " edge " << i << j;
+        EXPECT_EQ(K(i, j), K(j, i));
+      }
+    }
+  }
+}
+
+TEST(LaplaceStiffness, DegenerateTetContributesNothing) {
+  // Tet 0 is fine; tet 1 is flat (four coplanar points); tet 2 has a repeated vertex.
+  Eigen::MatrixXd V(7, 4);
+  V << 0, 0, 0, 0,  //
+      1, 0, 0, 0,   //
+      0, 1, 0, 0,   //
+      0, 0, 0, 1,   //
+      2, 2, 0, 0,   //
+      3, 2, 0, 0,   //
+      2, 3, 0, 0;
+  TetIndices T(3, 4);
+  T << 0, 1, 2, 3,  //
+      4, 5, 6, 1,   // z = 0 and tau = 0 for all four: a flat quad
+      0, 1, 1, 3;
+  Eigen::MatrixXd G;
+  Eigen::VectorXd vol;
+  barycentric_gradients(V, T, G, vol);
+  EXPECT_GT(vol(0), 0.0);
+  EXPECT_EQ(vol(1), 0.0);
+  EXPECT_EQ(vol(2), 0.0);
+  EXPECT_TRUE(G.allFinite());
+  EXPECT_EQ(G.bottomRows(8).cwiseAbs().maxCoeff(), 0.0);
+  const SparseMatrixD K = cotangent_stiffness(V, T);
+  const SparseMatrixD K_good = cotangent_stiffness(V, T.topRows(1));
+  EXPECT_EQ(Eigen::MatrixXd(K), Eigen::MatrixXd(K_good));
+}
+
+TEST(LaplaceStiffness, RejectsBadIndices) {
+  Eigen::MatrixXd V = Eigen::MatrixXd::Zero(3, 4);
+  TetIndices T(1, 4);
+  T << 0, 1, 2, 3;
+  EXPECT_THROW(cotangent_stiffness(V, T), InvalidInput);
+  EXPECT_THROW(cotangent_stiffness(Eigen::MatrixXd::Zero(4, 3), T), InvalidInput);
+}
+
+class LaplaceHarmonic : public ::testing::TestWithParam<std::string> {
+ protected:
+  LaplaceOptions options() const {
+    LaplaceOptions o;
+    o.solver = GetParam();
+    o.solve.tolerance = 1e-12;
+    return o;
+  }
+};
+
+TEST_P(LaplaceHarmonic, SlabIsLinearInTau) {
+  const TetMesh4 flat = test::make_slab_mesh(5, 6, 2.5);
+  const Eigen::VectorXd expected = expected_linear(flat);
+  TetMesh4 rotated = flat;  // same labels and expected values, new hulls
+  test::transform_embedding(rotated, test::random_rotation(3), Eigen::Vector4d(1.0, 2.0, 3.0, 4.0));
+  for (const TetMesh4* mesh : {&flat, static_cast<const TetMesh4*>(&rotated)}) {
+    LaplaceOptions o = options();
+    o.warm_start = false;  // else CG would start from the answer on the flat slab
+    const LaplaceResult result = solve_harmonic(*mesh, o);
+    ASSERT_EQ(result.s.size(), mesh->V.rows());
+    EXPECT_LT((result.s - expected).cwiseAbs().maxCoeff(), 1e-9);
+    EXPECT_EQ(result.unknowns, 6 * 6 * 5);
+    EXPECT_EQ(result.floating_components, 0);
+    EXPECT_EQ(result.floating_vertices, 0);
+    EXPECT_EQ(result.degenerate_tets, 0);
+    EXPECT_EQ(result.report.backend, GetParam());
+    EXPECT_LE(result.report.residual, 1e-12);
+    EXPECT_GE(result.seconds, result.assemble_seconds);
+  }
+}
+
+TEST_P(LaplaceHarmonic, FloatingComponentIsDetected) {
+  // The slab [0,1]^2 x [0,1] and, far from it, a box spanning t in [0.3, 0.6] with no A or B vertex.
+  const TetMesh4 slab = test::make_slab_mesh(3, 4);
+  test::BoxSpec spec;
+  spec.nx = spec.ny = 2;
+  spec.nz = 3;
+  spec.height = 0.3;
+  spec.origin = Eigen::Vector4d(5.0, 0.0, 0.0, 0.3);
+  spec.flag_ends = false;
+  const TetMesh4 box = test::make_box_mesh(spec);
+  const TetMesh4 mesh = test::merge_meshes(slab, box);
+  const LaplaceResult result = solve_harmonic(mesh, options());
+  EXPECT_EQ(result.floating_components, 1);
+  EXPECT_EQ(result.floating_vertices, box.V.rows());
+  EXPECT_EQ(result.unknowns, 4 * 4 * 3);
+  const Eigen::Index vs = slab.V.rows();
+  EXPECT_LT((result.s.head(vs) - expected_linear(slab)).cwiseAbs().maxCoeff(), 1e-9);
+  EXPECT_LT((result.s.tail(box.V.rows()).array() - 0.45).abs().maxCoeff(), 1e-12);
+}
+
+TEST_P(LaplaceHarmonic, OneSidedComponentIsConstant) {
+  // A component that touches only A (it vanishes mid-morph) gets s = 0 throughout.
+  const TetMesh4 slab = test::make_slab_mesh(3, 3);
+  test::BoxSpec spec;
+  spec.nz = 2;
+  spec.height = 0.4;
+  spec.origin = Eigen::Vector4d(-4.0, 0.0, 0.0, 0.0);
+  spec.flag_ends = false;
+  TetMesh4 box = test::make_box_mesh(spec);
+  for (Eigen::Index i = 0; i < box.V.rows(); ++i) {
+    if (box.V(i, 3) == 0.0) box.side[static_cast<std::size_t>(i)] = VertexSide::A;
+  }
+  const TetMesh4 mesh = test::merge_meshes(slab, box);
+  const LaplaceResult result = solve_harmonic(mesh, options());
+  EXPECT_EQ(result.floating_components, 0);
+  EXPECT_LT(result.s.tail(box.V.rows()).cwiseAbs().maxCoeff(), 1e-10);
+  EXPECT_LT((result.s.head(slab.V.rows()) - expected_linear(slab)).cwiseAbs().maxCoeff(), 1e-9);
+}
+
+TEST_P(LaplaceHarmonic, DegenerateTetIsSkipped) {
+  TetMesh4 mesh = test::make_slab_mesh(3, 3);
+  const Eigen::VectorXd expected = expected_linear(mesh);
+  // Four coplanar interior vertices of the layer k = 1 (ids (k * 4 + j) * 4 + i).
+  mesh.T.conservativeResize(mesh.T.rows() + 1, 4);
+  mesh.T.bottomRows(1) << 16, 17, 20, 21;
+  mesh.source_cell.push_back(0);
+  const LaplaceResult result = solve_harmonic(mesh, options());
+  EXPECT_EQ(result.degenerate_tets, 1);
+  EXPECT_LT((result.s - expected).cwiseAbs().maxCoeff(), 1e-9);
+}
+
+INSTANTIATE_TEST_SUITE_P(LaplaceBackends, LaplaceHarmonic, ::testing::Values("cholmod", "cg"),
+                         [](const ::testing::TestParamInfo<std::string>& info) { return info.param; });
+
+TEST(LaplaceHarmonicCompare, CholmodAndCgAgreeOnCurvedMesh) {
+  const TetMesh4 mesh = curved_slab(8, 8, 99);
+  LaplaceOptions options;
+  options.solver = "cholmod";
+  const LaplaceResult direct = solve_harmonic(mesh, options);
+  options.solver = "cg";
+  options.solve.tolerance = 1e-12;
+  const LaplaceResult iterative = solve_harmonic(mesh, options);
+  EXPECT_EQ(direct.unknowns, 9 * 9 * 7);
+  EXPECT_LT((direct.s - iterative.s).cwiseAbs().maxCoeff(), 1e-8);
+  EXPECT_GT(iterative.report.iterations, 1);
+  // Bent, the solution is no longer t: the test would pass trivially otherwise.
+  Eigen::VectorXd t(mesh.V.rows());
+  for (Eigen::Index i = 0; i < t.size(); ++i) t(i) = static_cast<double>(i / 81) / 8.0;
+  EXPECT_GT((direct.s - t).cwiseAbs().maxCoeff(), 1e-4);
+}
+
+TEST(LaplaceHarmonicCompare, CgIndependentOfThreadCount) {
+  const TetMesh4 mesh = curved_slab(24, 24, 4);
+  LaplaceOptions options;
+  options.solver = "cg";
+  std::vector<Eigen::VectorXd> s;
+  for (int threads : {1, 2}) {
+    tbb::global_control limit(tbb::global_control::max_allowed_parallelism, static_cast<std::size_t>(threads));
+    s.push_back(solve_harmonic(mesh, options).s);
+  }
+  EXPECT_EQ(std::memcmp(s[0].data(), s[1].data(), sizeof(double) * static_cast<std::size_t>(s[0].size())), 0);
+}
+
+TEST(LaplaceHarmonicCompare, WarmStartFromExactTime) {
+  // On the flat slab s = t exactly, so a warm start is already converged.
+  const TetMesh4 mesh = test::make_slab_mesh(4, 4);
+  LaplaceOptions options;
+  options.solver = "cg";
+  EXPECT_EQ(solve_harmonic(mesh, options).report.iterations, 0);
+  options.warm_start = false;
+  EXPECT_GT(solve_harmonic(mesh, options).report.iterations, 0);
+}
+
+TEST(LaplaceHarmonicCompare, RejectsBadInput) {
+  TetMesh4 mesh = test::make_slab_mesh(2, 2);
+  LaplaceOptions options;
+  options.solver = "lu";
+  try {
+    solve_harmonic(mesh, options);
+    FAIL() << "expected InvalidInput";
+  } catch (const InvalidInput& e) {
+    EXPECT_STREQ(e.what(), "unknown solver 'lu' (choose cholmod, cg)");
+  }
+  options.solver = "cholmod";
+  mesh.side.pop_back();
+  EXPECT_THROW(solve_harmonic(mesh, options), InvalidInput);
+}
+
+}  // namespace
+}  // namespace morphmap
