@@ -1,6 +1,6 @@
 // Tangent field T = grad s on the tetrahedral 3-manifold in R^4 (paper §6.2). The paper's equation 5 fits a
 // linear function through the origin; we fit the affine one inside each tet's hull instead,
-// grad s = E (E^T E)^-1 [s1 - s0, s2 - s0, s3 - s0]^T, which is exact for affine s and independent of where
+// grad s = E (E^T E)^-1 [s1 - s0, s2 - s0, s3 - s0]^T (evaluated through QR), which is exact for affine s and independent of where
 // the origin lies. Vertex values are the volume-weighted average of the incident tets, as in the paper.
 #include "solver/gradient.h"
 
@@ -51,7 +51,13 @@ GradientResult compute_gradient(const TetMesh4& mesh, const Eigen::VectorXd& s) 
     // Degenerate tets have no hull to take a gradient in: zero gradient, zero weight.
     if (!tet_frame(V, T, t, E, gram_inverse, volume)) return;
     const Eigen::Vector3d ds(s(T(t, 1)) - s(T(t, 0)), s(T(t, 2)) - s(T(t, 0)), s(T(t, 3)) - s(T(t, 0)));
-    result.tet_gradient.row(t) = (E * (gram_inverse * ds)).transpose();
+    // With E = Q R, E (E^T E)^-1 ds = Q R^-T ds: the QR form has E's conditioning instead of its square,
+    // which matters on the slivers next to lattice points (identity morph: T off by 3e-9 with the Gram inverse).
+    const Eigen::HouseholderQR<Eigen::Matrix<double, 4, 3>> qr(E);
+    const Eigen::Matrix3d R = qr.matrixQR().topLeftCorner<3, 3>().triangularView<Eigen::Upper>();
+    Eigen::Vector4d y = Eigen::Vector4d::Zero();
+    y.head<3>() = R.transpose().triangularView<Eigen::Lower>().solve(ds);
+    result.tet_gradient.row(t) = (qr.householderQ() * y).transpose();
     result.tet_volume(t) = volume;
   });
 

@@ -20,7 +20,7 @@ struct SolveOptions {
 /// Diagnostics of one factorisation plus one solve.
 struct SolveReport {
   std::string backend;          ///< "cholmod", "cg"
-  int iterations = 0;           ///< 1 for direct solvers
+  int iterations = 0;           ///< CG iterations; for direct solvers, back-substitutions (1 + refinement steps)
   double residual = 0.0;        ///< final relative residual |b - Ax| / |b| (computed, not estimated)
   double setup_seconds = 0.0;   ///< analysis + factorisation, or preconditioner set-up
   double solve_seconds = 0.0;
