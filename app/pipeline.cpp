@@ -206,12 +206,15 @@ PipelineResult run_pipeline(const PipelineOptions& options) {
                       {"solve_seconds", laplace.report.solve_seconds},
                       {"assemble_seconds", laplace.assemble_seconds},
                       {"floating_components", laplace.floating_components},
-                      {"floating_vertices", laplace.floating_vertices}};
+                      {"floating_vertices", laplace.floating_vertices},
+                      {"degenerate_tets", laplace.degenerate_tets}};
   report["transport"] = {{"fallbacks", transport.fallbacks()},
                          {"upwind_exact", transport.upwind_exact},
                          {"fallback_projected", transport.fallback_projected},
                          {"fallback_neighbours", transport.fallback_neighbours},
-                         {"fallback_unreached", transport.fallback_unreached}};
+                         {"fallback_unreached", transport.fallback_unreached},
+                         {"cycle_breaks", transport.cycle_breaks},
+                         {"wavefronts", transport.wavefronts}};
 
   if (!options.output_dir.empty()) {
     start = Clock::now();

