@@ -164,7 +164,8 @@ PipelineResult run_pipeline(const PipelineOptions& options) {
   progress.stage("transfer", seconds["transfer"]);
 
   result.target_labels = frame_a.to_world(points_of(hits));
-  const Eigen::MatrixXd target_positions = frame_b.to_world(result.target.V);
+  result.target.V = frame_b.to_world(result.target.V);
+  const Eigen::MatrixXd& target_positions = result.target.V;
   result.mesh_vertices = mesh.vertex_count();
   result.mesh_tets = mesh.tet_count();
   result.fallbacks = transport.fallbacks();

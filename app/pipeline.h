@@ -30,7 +30,7 @@ struct PipelineOptions {
 
 struct PipelineResult {
   std::string report_json;          ///< the report.json text (also written to output_dir)
-  SliceMesh target;                 ///< B as extracted (t = 1 boundary), in B's coordinates; labels raw
+  SliceMesh target;                 ///< B as extracted (t = 1 boundary): V in B's coordinates, labels raw (morph frame)
   Eigen::MatrixXd target_labels;    ///< #target.V by 3: preimage on A (closest point of A to the raw label), A's coordinates
   Eigen::MatrixXd target_uv;        ///< #target.V by 2 texture coordinates; empty when A has no UVs
   std::int64_t mesh_vertices = 0;   ///< vertices of the 4D tet mesh

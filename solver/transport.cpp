@@ -186,6 +186,19 @@ class Sweep {
 TransportResult transport_labels(const TetMesh4& mesh, const Eigen::VectorXd& s, const Eigen::MatrixXd& vertex_field,
                                  const std::function<Eigen::Vector3d(const Eigen::Vector3d&)>& unreached,
                                  const TransportOptions& options) {
+  if (mesh.V.cols() != 4) throw InvalidInput("transport_labels: mesh.V must be #V by 4");
+  const Eigen::MatrixXd positions = mesh.V.leftCols(3);
+  return transport_values(mesh, s, vertex_field, positions,
+                          [&](const Eigen::Vector3d& x) -> Eigen::RowVectorXd {
+                            return (unreached ? unreached(x) : x).transpose();
+                          },
+                          options);
+}
+
+TransportResult transport_values(const TetMesh4& mesh, const Eigen::VectorXd& s, const Eigen::MatrixXd& vertex_field,
+                                 const Eigen::MatrixXd& source,
+                                 const std::function<Eigen::RowVectorXd(const Eigen::Vector3d&)>& unreached,
+                                 const TransportOptions& options) {
   const auto start = std::chrono::steady_clock::now();
   const Eigen::Index nv = mesh.vertex_count();
   if (mesh.V.cols() != 4) throw InvalidInput("transport_labels: mesh.V must be #V by 4");
@@ -199,9 +212,11 @@ TransportResult transport_labels(const TetMesh4& mesh, const Eigen::VectorXd& s,
   if (!s.allFinite() || !vertex_field.allFinite()) throw InvalidInput("transport_labels: s or vertex_field not finite");
   if (mesh.T.size() > 0 && (mesh.T.minCoeff() < 0 || mesh.T.maxCoeff() >= nv))
     throw InvalidInput("transport_labels: tet index out of range");
+  if (source.rows() != nv || source.cols() < 1) throw InvalidInput("transport_values: source must be #V by k, k >= 1");
+  const Eigen::Index width = source.cols();
 
   TransportResult result;
-  result.labels = Eigen::MatrixXd::Zero(nv, 3);
+  result.labels = Eigen::MatrixXd::Zero(nv, width);
   if (options.record_upwind) {
     result.upwind = Eigen::MatrixXi::Constant(nv, 3, -1);
     result.wave = Eigen::VectorXi::Constant(nv, -1);
@@ -273,7 +288,7 @@ TransportResult transport_labels(const TetMesh4& mesh, const Eigen::VectorXd& s,
 
   auto label_one = [&](int v) {
     if (mesh.side[std::size_t(v)] == VertexSide::A) {
-      result.labels.row(v) = mesh.V.row(v).head<3>();
+      result.labels.row(v) = source.row(v);
       return;
     }
     const UpwindFace& f = face[std::size_t(v)];
@@ -283,7 +298,7 @@ TransportResult transport_labels(const TetMesh4& mesh, const Eigen::VectorXd& s,
         kind[std::size_t(v)] = kProjected;
       } else {
         // A local minimum of s: the labelled neighbours are the best causal estimate available.
-        Eigen::Vector3d sum = Eigen::Vector3d::Zero();
+        Eigen::RowVectorXd sum = Eigen::RowVectorXd::Zero(width);
         int count = 0, shown = 0;
         int last_u = -1;
         std::vector<int> nb;
@@ -296,26 +311,32 @@ TransportResult transport_labels(const TetMesh4& mesh, const Eigen::VectorXd& s,
         for (int u : nb) {
           if (u == last_u) continue;
           last_u = u;
-          sum += result.labels.row(u).transpose();
+          sum += result.labels.row(u);
           if (options.record_upwind && shown < 3) result.upwind(v, shown++) = u;
           ++count;
         }
         if (count > 0) {
-          result.labels.row(v) = (sum / count).transpose();
+          result.labels.row(v) = sum / count;
           kind[std::size_t(v)] = kNeighbours;
         } else {
           // Nothing flows in (a component born mid-morph): the caller decides, by default the vertex itself.
           const Eigen::Vector3d x = mesh.V.row(v).head<3>().transpose();
-          result.labels.row(v) = (unreached ? unreached(x) : x).transpose();
+          if (unreached) {
+            const Eigen::RowVectorXd value = unreached(x);
+            if (value.size() != width) throw InvalidInput("transport_values: unreached() returned the wrong width");
+            result.labels.row(v) = value;
+          } else {
+            result.labels.row(v) = source.row(v);
+          }
           kind[std::size_t(v)] = kUnreached;
         }
         return;
       }
     }
-    Eigen::Vector3d label = Eigen::Vector3d::Zero();
+    Eigen::RowVectorXd label = Eigen::RowVectorXd::Zero(width);
     for (int k = 0; k < 3; ++k)
-      if (use.ids[std::size_t(k)] >= 0) label += use.weights(k) * result.labels.row(use.ids[std::size_t(k)]).transpose();
-    result.labels.row(v) = label.transpose();
+      if (use.ids[std::size_t(k)] >= 0) label += use.weights(k) * result.labels.row(use.ids[std::size_t(k)]);
+    result.labels.row(v) = label;
     if (options.record_upwind)
       for (int k = 0; k < 3; ++k) result.upwind(v, k) = use.ids[std::size_t(k)];
   };

@@ -43,4 +43,11 @@ TransportResult transport_labels(const TetMesh4& mesh, const Eigen::VectorXd& s,
                                  const std::function<Eigen::Vector3d(const Eigen::Vector3d&)>& unreached,
                                  const TransportOptions& options = {});
 
+/// The same sweep for any attribute: `source` is #V by k and is read at side-A vertices only; the
+/// result's `labels` is #V by k. `unreached(x)` returns a 1 by k row for vertices nothing flows into.
+TransportResult transport_values(const TetMesh4& mesh, const Eigen::VectorXd& s, const Eigen::MatrixXd& vertex_field,
+                                 const Eigen::MatrixXd& source,
+                                 const std::function<Eigen::RowVectorXd(const Eigen::Vector3d&)>& unreached,
+                                 const TransportOptions& options = {});
+
 }  // namespace morphmap

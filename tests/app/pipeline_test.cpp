@@ -81,5 +81,23 @@ TEST(Pipeline, SphereToTorusLabelsEveryTargetVertexAndTransfersUv) {
   EXPECT_LT(report["solver"]["residual"].get<double>(), 1e-8);
 }
 
+TEST(Pipeline, AlignBboxReturnsOutputsInEachInputsFrame) {
+  // A small sphere far from a large torus: --align bbox morphs them in a common frame, then the
+  // target comes back in the torus' coordinates and the preimages in the sphere's.
+  PipelineOptions o = small_options("sphere:size=0.5,center=10/0/0,res=48", "torus:size=3,center=-5/2/1", "cg");
+  o.align = "bbox";
+  const PipelineResult r = run_pipeline(o);
+  const nlohmann::json report = nlohmann::json::parse(r.report_json);
+  const Eigen::AlignedBox3d box = bounding_box(r.target.V);
+  // The extracted surface lies within one voxel of the torus box (voxel in the torus frame: 3 / unit frame).
+  const double tolerance = 3.0 * report["options"]["voxel_size"].get<double>();
+  EXPECT_NEAR(box.min().x(), -8.0, tolerance);
+  EXPECT_NEAR(box.max().x(), -2.0, tolerance);
+  EXPECT_NEAR(box.center().y(), 2.0, tolerance);
+  EXPECT_NEAR(box.center().z(), 1.0, tolerance);
+  for (Eigen::Index v = 0; v < r.target_labels.rows(); ++v)
+    ASSERT_NEAR((r.target_labels.row(v) - Eigen::RowVector3d(10, 0, 0)).norm(), 0.5, 5e-3);  // facet sag of a 48-gon
+}
+
 }  // namespace
 }  // namespace morphmap

@@ -33,6 +33,30 @@ TEST(TransportTest, IdentityMorphMapsEveryVertexToItself) {
   EXPECT_EQ(r.upwind_exact, mesh.vertex_count() - icosphere(1).V.rows());
 }
 
+TEST(TransportTest, ConstantAttributeIsTransportedUnchanged) {
+  // A constant on A must arrive unchanged everywhere, whatever the flow: every label is a convex
+  // combination (or a mean) of labels already computed.
+  const TetMesh4 mesh = product_mesh(icosphere(2), 5, 1.0, 1.0, 1.8);
+  const Eigen::VectorXd s = time_field(mesh);
+  const Eigen::RowVector2d constant(0.25, -3.5);
+  const Eigen::MatrixXd source = constant.replicate(mesh.vertex_count(), 1);
+  const TransportResult r = transport_values(mesh, s, gradient_field(mesh, s), source,
+                                             [&](const Eigen::Vector3d&) -> Eigen::RowVectorXd { return constant; });
+  ASSERT_EQ(r.labels.rows(), mesh.vertex_count());
+  ASSERT_EQ(r.labels.cols(), 2);
+  EXPECT_LE((r.labels.rowwise() - constant).cwiseAbs().maxCoeff(), 1e-12);
+  EXPECT_GT(r.upwind_exact, 0);
+}
+
+TEST(TransportTest, EveryVertexGetsAFiniteLabel) {
+  const TetMesh4 mesh = product_mesh(icosphere(2), 4, 0.7, 1.0, 0.6);
+  const Eigen::VectorXd s = time_field(mesh);
+  const TransportResult r = transport_labels(mesh, s, gradient_field(mesh, s), own_position);
+  ASSERT_EQ(r.labels.rows(), mesh.vertex_count());
+  EXPECT_TRUE(r.labels.allFinite());
+  EXPECT_EQ(r.upwind_exact + r.fallbacks() + std::int64_t(icosphere(2).V.rows()), mesh.vertex_count());
+}
+
 // Worst angle between the label of a B vertex and the radial preimage of that vertex on A.
 double worst_radial_error(const test_mesh::TriSurface& sphere, const TetMesh4& mesh, const Eigen::MatrixXd& labels) {
   double worst = 0.0;
