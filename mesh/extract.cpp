@@ -1,42 +1,52 @@
 // Marching pentatopes over the space-time lattice (paper §5.2). Each hypercube is split into the 24
-// Kuhn simplices (the Freudenthal triangulation is conforming across cells); a linear field cuts a
-// pentatope in a tetrahedron (1|4 sign split) or a triangular prism (2|3). Prisms are split into
-// three tets by the rule of Dompierre et al. ("How to subdivide pyramids, prisms and hexahedra into
-// tetrahedra", 1999): every quad face takes the diagonal from its vertex with the smallest global
-// key, so neighbouring pentatopes agree and the mesh is watertight. Written by hand because no
-// library extracts iso-hypersurfaces in 4D.
+// Kuhn (Freudenthal) simplices, a triangulation that is conforming across cells; a linear field cuts a
+// pentatope in a tetrahedron (1|4 sign split) or a triangular prism (2|3). Prisms are split into three
+// tets by the rule of Dompierre et al. ("How to subdivide pyramids, prisms and hexahedra into
+// tetrahedra", 1999): every quad face takes the diagonal from its vertex with the smallest global id,
+// so neighbouring pentatopes agree and the mesh is watertight. Written by hand: no library extracts
+// iso-hypersurfaces in 4D.
+//
+// Two passes over the cells that can change sign, both TBB-parallel. The first counts, per cell, the
+// tets it emits and the crossing edges it owns (the edges leaving its lower corner); prefix sums then
+// give every cell its slice of the output arrays and every crossing edge its vertex id, so the second
+// pass writes vertices, oriented tets and provenance in place. No sort, no hash table, no per-thread
+// buffers: output order and ids are fixed by the lattice alone, whatever the thread count.
 #include "mesh/extract.h"
 
 #include <tbb/blocked_range.h>
 #include <tbb/parallel_for.h>
-#include <tbb/parallel_sort.h>
 
 #include <Eigen/Dense>
 #include <algorithm>
 #include <array>
+#include <bitset>
 #include <chrono>
 #include <cmath>
+#include <limits>
 
 #include "mesh/errors.h"
 
 namespace morphmap {
 namespace {
 
-// Kuhn simplex m of the unit hypercube walks from corner 0000 to 1111, adding one axis per step in
-// the order of permutation m. Corner bits: 1 = x, 2 = y, 4 = z, 8 = t.
+// Kuhn simplex s of the unit hypercube walks from corner 0000 to 1111, adding one axis per step in the
+// order of permutation s. Corner bits: 1 = x, 2 = y, 4 = z, 8 = t.
 struct KuhnTable {
   std::array<std::array<int, 5>, 24> corner{};  // corner bitmask of simplex vertex 0..4
   std::array<std::array<int, 4>, 24> axis{};    // axis added between vertex m and m + 1
+  std::array<unsigned, 24> corner_set{};        // bit c set when corner c is a vertex of the simplex
   KuhnTable() {
     std::array<int, 4> perm{0, 1, 2, 3};
     int s = 0;
     do {
       int mask = 0;
-      corner[s][0] = 0;
+      corner[std::size_t(s)][0] = 0;
+      corner_set[std::size_t(s)] = 1u;
       for (int m = 0; m < 4; ++m) {
-        axis[s][m] = perm[m];
-        mask |= 1 << perm[m];
-        corner[s][m + 1] = mask;
+        axis[std::size_t(s)][std::size_t(m)] = perm[std::size_t(m)];
+        mask |= 1 << perm[std::size_t(m)];
+        corner[std::size_t(s)][std::size_t(m) + 1] = mask;
+        corner_set[std::size_t(s)] |= 1u << mask;
       }
       ++s;
     } while (std::next_permutation(perm.begin(), perm.end()));
@@ -44,257 +54,319 @@ struct KuhnTable {
 };
 const KuhnTable kKuhn;
 
-// A crossing vertex is identified by its lattice edge: the lower lattice point's global id and the
-// 0/1 offset to the upper one (edges of Kuhn simplices are monotone), packed in 64 bits.
-using EdgeKey = std::uint64_t;
-inline EdgeKey edge_key(std::int64_t lower_id, int offset_mask) { return (std::uint64_t(lower_id) << 4) | unsigned(offset_mask); }
-
 // Prism vertex relabelings that move vertex v to position 0 (bottom 0,1,2; top 3,4,5; i above i+3).
 constexpr int kPrismRotation[6][6] = {{0, 1, 2, 3, 4, 5}, {1, 2, 0, 4, 5, 3}, {2, 0, 1, 5, 3, 4},
                                       {3, 5, 4, 0, 2, 1}, {4, 3, 5, 1, 0, 2}, {5, 4, 3, 2, 1, 0}};
 
-struct LocalTet {
-  std::array<EdgeKey, 4> key;
-  std::int64_t source;
-};
-
-struct ChunkOutput {
-  std::vector<LocalTet> tets;
-  std::int64_t active_cells = 0;
-  std::int64_t prisms = 0;
-};
+// Splits a prism into three tets (indices into `id`) with diagonals chosen by global vertex id.
+int split_prism(const std::array<int, 6>& id, int out[3][4]) {
+  const int vmin = int(std::min_element(id.begin(), id.end()) - id.begin());
+  const int* r = kPrismRotation[vmin];
+  auto k = [&](int i) { return id[std::size_t(r[i])]; };
+  if (std::min(k(1), k(5)) < std::min(k(2), k(4))) {
+    const int t[3][4] = {{r[0], r[1], r[2], r[5]}, {r[0], r[1], r[5], r[4]}, {r[0], r[4], r[5], r[3]}};
+    std::copy(&t[0][0], &t[0][0] + 12, &out[0][0]);
+  } else {
+    const int t[3][4] = {{r[0], r[1], r[2], r[4]}, {r[0], r[4], r[2], r[5]}, {r[0], r[4], r[5], r[3]}};
+    std::copy(&t[0][0], &t[0][0] + 12, &out[0][0]);
+  }
+  return 3;
+}
 
 struct Lattice {
   const MorphField& field;
   int K;
-  double h, dt_len;  // spatial spacing and tau spacing (c / K)
+  double h, dt;  // spatial spacing and tau spacing (c / K)
   double snap;
-  std::int64_t n3;   // lattice points per time level
+  std::int64_t n3, sx, sy, sz;  // points per time level; strides of x, y, z
+  std::int64_t cx, cy, cz;      // cubes per axis
 
+  // The one place a lattice value is computed, so every cell sharing a lattice point sees the same float.
   float value(std::int64_t idx3, int level) const {
     const double t = double(level) / K;
     double d = (1.0 - t) * field.dA[std::size_t(idx3)] + t * field.dB[std::size_t(idx3)];
     if (std::abs(d) < snap) d = d < 0.0 ? -snap : snap;
     return float(d);
   }
+  std::int64_t corner_index(std::int64_t base3, int b) const {
+    return base3 + ((b & 1) ? sx : 0) + ((b & 2) ? sy : 0) + ((b & 4) ? sz : 0);
+  }
+  // Crossing on the lattice edge from lower point (i, j, k, level) along corner mask m; the same
+  // arguments give the same bits in every cell that computes it.
+  Eigen::Vector4d crossing(std::int64_t i, std::int64_t j, std::int64_t k, int level, int m, float f0, float f1) const {
+    const double w = double(f0) / (double(f0) - double(f1));
+    Eigen::Vector4d q(field.origin.x() + h * double(i), field.origin.y() + h * double(j),
+                      field.origin.z() + h * double(k), dt * level);
+    if (m & 1) q(0) += w * h;
+    if (m & 2) q(1) += w * h;
+    if (m & 4) q(2) += w * h;
+    if (m & 8) q(3) += w * dt;
+    return q;
+  }
 };
 
-void split_prism(const std::array<EdgeKey, 6>& key, std::vector<std::array<int, 4>>& out) {
-  int vmin = int(std::min_element(key.begin(), key.end()) - key.begin());
-  const int* r = kPrismRotation[vmin];
-  auto k = [&](int i) { return key[std::size_t(r[i])]; };
-  if (std::min(k(1), k(5)) < std::min(k(2), k(4))) {
-    out.push_back({r[0], r[1], r[2], r[5]});
-    out.push_back({r[0], r[1], r[5], r[4]});
-  } else {
-    out.push_back({r[0], r[1], r[2], r[4]});
-    out.push_back({r[0], r[4], r[2], r[5]});
+// The 16 corner values of the 4D cell (cube, level), corner bit 8 = upper time level.
+struct Cell {
+  std::int64_t cube = 0, i = 0, j = 0, k = 0, base3 = 0;
+  int level = 0;
+  float f[16];
+  unsigned positive = 0;  // bit c set when f[c] > 0
+};
+
+// Crossing edges owned by a cell: bit m (1..15) for the edge from corner 0 to corner m; in the top
+// time slab also bit 15 + m (m = 1..7) for the spatial edge from corner 8 to corner 8 | m, so that the
+// t = 1 vertices have an owner too.
+unsigned owned_edges(const Cell& c, int K) {
+  unsigned bits = 0;
+  const bool p0 = c.positive & 1u;
+  for (int m = 1; m < 16; ++m)
+    if (bool(c.positive & (1u << m)) != p0) bits |= 1u << m;
+  if (c.level == K - 1) {
+    const bool p8 = c.positive & (1u << 8);
+    for (int m = 1; m < 8; ++m)
+      if (bool(c.positive & (1u << (8 | m))) != p8) bits |= 1u << (15 + m);
   }
-  out.push_back({r[0], r[4], r[5], r[3]});
+  return bits;
 }
+
+constexpr std::int64_t kChunkCubes = 64;
 
 }  // namespace
 
 ExtractResult extract_hypersurface(const MorphField& field, const ExtractOptions& options) {
   const auto start = std::chrono::steady_clock::now();
   if (options.time_steps < 1)
-    throw InvalidInput("extract_hypersurface: time_steps must be at least 1 (got " + std::to_string(options.time_steps) + ")");
+    throw InvalidInput("extract_hypersurface: time_steps must be at least 1 (got " + std::to_string(options.time_steps) +
+                       ")");
   const Eigen::Vector3i& dims = field.dims;
   if ((dims.array() < 2).any()) throw InvalidInput("extract_hypersurface: lattice has fewer than 2 points along an axis");
+  const std::int64_t n3 = std::int64_t(dims.x()) * dims.y() * dims.z();
+  if (field.dA.size() != std::size_t(n3) || field.dB.size() != std::size_t(n3))
+    throw InvalidInput("extract_hypersurface: field arrays do not match the lattice dimensions");
 
   ExtractResult result;
   TetMesh4& mesh = result.mesh;
-  mesh.time_steps = options.time_steps;
+  const int K = options.time_steps;
+  mesh.time_steps = K;
   mesh.voxel_size = field.voxel_size;
-  mesh.time_scale = options.time_scale > 0.0 ? options.time_scale : options.time_steps * field.voxel_size;
-
-  const Lattice lat{field, options.time_steps, field.voxel_size, mesh.time_scale / options.time_steps,
-                    options.zero_snap * field.voxel_size, std::int64_t(dims.x()) * dims.y() * dims.z()};
-  const std::int64_t stride[4] = {1, dims.x(), std::int64_t(dims.x()) * dims.y(), lat.n3};
-  const double spacing[4] = {lat.h, lat.h, lat.h, lat.dt_len};
-
+  mesh.time_scale = options.time_scale > 0.0 ? options.time_scale : K * field.voxel_size;
+  const Lattice lat{field, K, field.voxel_size, mesh.time_scale / K, options.zero_snap * field.voxel_size, n3, 1,
+                    dims.x(), std::int64_t(dims.x()) * dims.y(), dims.x() - 1, dims.y() - 1, dims.z() - 1};
+  const double spacing[4] = {lat.h, lat.h, lat.h, lat.dt};
   for (std::size_t q = 0; q < field.dA.size(); ++q)
     result.snapped_values += (std::abs(field.dA[q]) < lat.snap) + (std::abs(field.dB[q]) < lat.snap);
-  // Spatial cubes where d can change sign at some t: neither both fields positive at all corners
-  // nor both negative at all corners (d is a convex combination of dA and dB).
-  const int cx = dims.x() - 1, cy = dims.y() - 1, cz = dims.z() - 1;
-  const std::int64_t cube_count = std::int64_t(cx) * cy * cz;
 
-  // Fixed chunking (independent of the thread count) so concatenating chunk outputs in chunk order
-  // gives the same tet order on every run.
-  const std::int64_t chunk = 4096;
-  const std::int64_t chunks = (cube_count + chunk - 1) / chunk;
-  std::vector<ChunkOutput> outputs(static_cast<std::size_t>(chunks));
-
-  tbb::parallel_for(tbb::blocked_range<std::int64_t>(0, chunks), [&](const tbb::blocked_range<std::int64_t>& range) {
-    std::vector<std::array<int, 4>> prism_tets;
-    for (std::int64_t c = range.begin(); c != range.end(); ++c) {
-      ChunkOutput& out = outputs[std::size_t(c)];
-      const std::int64_t end = std::min(cube_count, (c + 1) * chunk);
-      for (std::int64_t cube = c * chunk; cube < end; ++cube) {
-        const int i = int(cube % cx), j = int((cube / cx) % cy), k = int(cube / (std::int64_t(cx) * cy));
-        const std::int64_t base3 = field.index(i, j, k);
-        std::int64_t corner3[8];
-        bool any_nonneg = false, any_nonpos = false;
-        for (int b = 0; b < 8; ++b) {
-          corner3[b] = base3 + ((b & 1) ? stride[0] : 0) + ((b & 2) ? stride[1] : 0) + ((b & 4) ? stride[2] : 0);
-          const float a = field.dA[std::size_t(corner3[b])], bb = field.dB[std::size_t(corner3[b])];
-          any_nonneg |= a >= 0.0f || bb >= 0.0f;
-          any_nonpos |= a < 0.0f || bb < 0.0f;
-        }
-        if (!(any_nonneg && any_nonpos)) continue;
-        float prev[8];
-        for (int b = 0; b < 8; ++b) prev[b] = lat.value(corner3[b], 0);
-        for (int l = 0; l < options.time_steps; ++l) {
-          float f[16];
-          bool pos = false, neg = false;
-          for (int b = 0; b < 8; ++b) {
-            f[b] = prev[b];
-            f[b + 8] = lat.value(corner3[b], l + 1);
-            prev[b] = f[b + 8];
+  // Candidate cubes: d can change sign over a cube only if neither both fields are >= 0 at all its
+  // corners nor both < 0 (d is a convex combination of dA and dB). Chunks are concatenated in order.
+  const std::int64_t cube_count = lat.cx * lat.cy * lat.cz;
+  std::vector<std::int32_t> cube_ordinal(std::size_t(cube_count), -1);
+  std::vector<std::int64_t> candidates;
+  {
+    const std::int64_t slab = lat.cx * lat.cy;
+    std::vector<std::vector<std::int64_t>> per_z(std::size_t(lat.cz));
+    tbb::parallel_for(tbb::blocked_range<std::int64_t>(0, lat.cz), [&](const tbb::blocked_range<std::int64_t>& r) {
+      for (std::int64_t k = r.begin(); k != r.end(); ++k)
+        for (std::int64_t j = 0; j < lat.cy; ++j)
+          for (std::int64_t i = 0; i < lat.cx; ++i) {
+            const std::int64_t base3 = i + lat.sy * j + lat.sz * k;
+            bool nonneg = false, neg = false;
+            for (int b = 0; b < 8; ++b) {
+              const std::size_t q = std::size_t(lat.corner_index(base3, b));
+              nonneg |= field.dA[q] >= 0.0f || field.dB[q] >= 0.0f;
+              neg |= field.dA[q] < 0.0f || field.dB[q] < 0.0f;
+            }
+            if (nonneg && neg) per_z[std::size_t(k)].push_back(i + lat.cx * j + slab * k);
           }
-          for (float v : f) (v > 0.0f ? pos : neg) = true;
-          if (!(pos && neg)) continue;
-          ++out.active_cells;
-          const std::int64_t base = base3 + lat.n3 * l;
+    });
+    for (const auto& z : per_z) candidates.insert(candidates.end(), z.begin(), z.end());
+  }
+  if (candidates.size() >= std::size_t(std::numeric_limits<std::int32_t>::max()))
+    throw InvalidInput("extract_hypersurface: too many candidate cubes (" + std::to_string(candidates.size()) + ")");
+  for (std::size_t c = 0; c < candidates.size(); ++c) cube_ordinal[std::size_t(candidates[c])] = std::int32_t(c);
+  result.candidate_cubes = std::int64_t(candidates.size());
+
+  auto load = [&](std::int64_t ordinal, int level, Cell& cell, bool first_level, const float* below) {
+    cell.cube = candidates[std::size_t(ordinal)];
+    cell.i = cell.cube % lat.cx;
+    cell.j = (cell.cube / lat.cx) % lat.cy;
+    cell.k = cell.cube / (lat.cx * lat.cy);
+    cell.base3 = cell.i + lat.sy * cell.j + lat.sz * cell.k;
+    cell.level = level;
+    for (int b = 0; b < 8; ++b) {
+      const std::int64_t q = lat.corner_index(cell.base3, b);
+      cell.f[b] = first_level ? lat.value(q, level) : below[b];
+      cell.f[b + 8] = lat.value(q, level + 1);
+    }
+    cell.positive = 0;
+    for (int b = 0; b < 16; ++b)
+      if (cell.f[b] > 0.0f) cell.positive |= 1u << b;
+  };
+
+  // Pass 1: tets and owned crossing edges per cell (slot = ordinal * K + level).
+  const std::int64_t slots = std::int64_t(candidates.size()) * K;
+  std::vector<std::uint32_t> cell_bits(std::size_t(slots), 0);
+  std::vector<std::uint8_t> cell_tets(std::size_t(slots), 0);
+  const std::int64_t chunks = (std::int64_t(candidates.size()) + kChunkCubes - 1) / kChunkCubes;
+  std::vector<std::int64_t> chunk_prisms(std::size_t(chunks), 0), chunk_active(std::size_t(chunks), 0);
+  tbb::parallel_for(tbb::blocked_range<std::int64_t>(0, chunks), [&](const tbb::blocked_range<std::int64_t>& r) {
+    Cell cell;
+    for (std::int64_t c = r.begin(); c != r.end(); ++c) {
+      const std::int64_t end = std::min<std::int64_t>(std::int64_t(candidates.size()), (c + 1) * kChunkCubes);
+      for (std::int64_t o = c * kChunkCubes; o < end; ++o)
+        for (int l = 0; l < K; ++l) {
+          load(o, l, cell, l == 0, cell.f + 8);
+          if (cell.positive == 0 || cell.positive == 0xFFFFu) continue;
+          ++chunk_active[std::size_t(c)];
+          const std::size_t slot = std::size_t(o * K + l);
+          cell_bits[slot] = owned_edges(cell, K);
+          int tets = 0;
+          for (int s = 0; s < 24; ++s) {
+            const int np = int(std::bitset<16>(cell.positive & kKuhn.corner_set[std::size_t(s)]).count());
+            if (np == 0 || np == 5) continue;
+            const bool prism = np == 2 || np == 3;
+            tets += prism ? 3 : 1;
+            chunk_prisms[std::size_t(c)] += prism;
+          }
+          cell_tets[slot] = std::uint8_t(tets);
+        }
+    }
+  });
+  for (std::int64_t c = 0; c < chunks; ++c) {
+    result.prisms += chunk_prisms[std::size_t(c)];
+    result.active_cells += chunk_active[std::size_t(c)];
+  }
+
+  // Prefix sums: first tet and first vertex id of every cell.
+  std::vector<std::int64_t> tet_offset(std::size_t(slots) + 1, 0), vertex_base(std::size_t(slots) + 1, 0);
+  for (std::int64_t q = 0; q < slots; ++q) {
+    tet_offset[std::size_t(q) + 1] = tet_offset[std::size_t(q)] + cell_tets[std::size_t(q)];
+    vertex_base[std::size_t(q) + 1] = vertex_base[std::size_t(q)] + std::bitset<32>(cell_bits[std::size_t(q)]).count();
+  }
+  const std::int64_t tet_count = tet_offset.back(), vertex_count = vertex_base.back();
+  if (tet_count == 0) throw TopologyError("extract_hypersurface: the morph field has no zero crossing in the lattice");
+  if (vertex_count >= std::numeric_limits<int>::max())
+    throw InvalidInput("extract_hypersurface: " + std::to_string(vertex_count) + " vertices exceed 32-bit indices");
+  std::vector<std::uint8_t>().swap(cell_tets);
+  result.scratch_bytes = std::int64_t(cube_ordinal.size() * 4 + candidates.size() * 8) + slots * (4 + 8 + 8);
+  if (options.before_allocate) options.before_allocate(tet_count, vertex_count);
+
+  mesh.V.resize(vertex_count, 4);
+  mesh.T.resize(tet_count, 4);
+  mesh.source_cell.resize(std::size_t(tet_count));
+  mesh.side.assign(std::size_t(vertex_count), VertexSide::Interior);
+
+  // Vertex id of the crossing on edge (a, b) of the current cell, a subset of b: the edge belongs to the
+  // cell whose lower corner is corner a (the top-slab cell for spatial edges at t = 1).
+  auto vertex_id = [&](const Cell& cell, int a, int b) {
+    const std::int64_t owner = cube_ordinal[std::size_t(cell.cube + (a & 1) + lat.cx * ((a >> 1) & 1) +
+                                                         lat.cx * lat.cy * ((a >> 2) & 1))];
+    const int level = cell.level + (a >> 3);
+    const int m = a ^ b;
+    const std::size_t slot = std::size_t(owner * K + std::min(level, K - 1));
+    const int bit = level == K ? 15 + m : m;
+    return int(vertex_base[slot] + std::bitset<32>(cell_bits[slot] & ((1u << bit) - 1u)).count());
+  };
+
+  // Pass 2: owned vertices, then tets, oriented so cross4 points where d increases.
+  const double degenerate_volume = 1e-12 * lat.h * lat.h * lat.h;
+  std::vector<double> chunk_min(std::size_t(chunks), std::numeric_limits<double>::infinity());
+  std::vector<double> chunk_sum(std::size_t(chunks), 0.0);
+  std::vector<std::int64_t> chunk_degenerate(std::size_t(chunks), 0);
+  tbb::parallel_for(tbb::blocked_range<std::int64_t>(0, chunks), [&](const tbb::blocked_range<std::int64_t>& r) {
+    Cell cell;
+    int edge_id[16][16];
+    for (std::int64_t c = r.begin(); c != r.end(); ++c) {
+      const std::int64_t end = std::min<std::int64_t>(std::int64_t(candidates.size()), (c + 1) * kChunkCubes);
+      for (std::int64_t o = c * kChunkCubes; o < end; ++o)
+        for (int l = 0; l < K; ++l) {
+          load(o, l, cell, l == 0, cell.f + 8);
+          if (cell.positive == 0 || cell.positive == 0xFFFFu) continue;
+          const std::size_t slot = std::size_t(o * K + l);
+          const unsigned bits = cell_bits[slot];
+          std::int64_t id = vertex_base[slot];
+          for (int bit = 1; bit < 23; ++bit) {
+            if (!(bits & (1u << bit))) continue;
+            const bool top = bit > 15;
+            const int a = top ? 8 : 0, m = top ? bit - 15 : bit;
+            mesh.V.row(id) = lat.crossing(cell.i, cell.j, cell.k, l + (a >> 3), m, cell.f[a], cell.f[a | m]).transpose();
+            mesh.side[std::size_t(id)] = top ? VertexSide::B : (l == 0 && m < 8 ? VertexSide::A : VertexSide::Interior);
+            ++id;
+          }
+          for (auto& row : edge_id) std::fill(std::begin(row), std::end(row), -1);
+          auto vid = [&](int a, int b) {
+            if (a > b) std::swap(a, b);
+            int& e = edge_id[a][b];
+            if (e < 0) e = vertex_id(cell, a, b);
+            return e;
+          };
+          auto point = [&](int a, int b) {
+            if (a > b) std::swap(a, b);
+            return lat.crossing(cell.i + (a & 1), cell.j + ((a >> 1) & 1), cell.k + ((a >> 2) & 1), l + (a >> 3), a ^ b,
+                                cell.f[a], cell.f[b]);
+          };
+          std::int64_t row = tet_offset[slot];
+          const std::int64_t source_base = (cell.base3 + lat.n3 * l) * 24;
           for (int s = 0; s < 24; ++s) {
             const auto& cm = kKuhn.corner[std::size_t(s)];
             int P[5], N[5], np = 0, nn = 0;
-            for (int m = 0; m < 5; ++m) (f[cm[std::size_t(m)]] > 0.0f ? P[np++] : N[nn++]) = m;
+            for (int q = 0; q < 5; ++q) (cell.positive & (1u << cm[std::size_t(q)]) ? P[np++] : N[nn++]) = cm[std::size_t(q)];
             if (np == 0 || nn == 0) continue;
-            // Edge key of simplex vertices (m1, m2), m1 < m2 along the walk so corner m1 <= corner m2.
-            auto key = [&](int m1, int m2) {
-              if (m1 > m2) std::swap(m1, m2);
-              const int lo = cm[std::size_t(m1)], hi = cm[std::size_t(m2)];
-              std::int64_t id = base;
-              for (int a = 0; a < 4; ++a)
-                if (lo & (1 << a)) id += stride[a];
-              return edge_key(id, hi & ~lo);
-            };
-            const std::int64_t source = (base)*24 + s;
+            // Gradient of the simplex's linear interpolant, one axis per step of the Kuhn walk.
+            Eigen::Vector4d g;
+            for (int q = 0; q < 4; ++q) {
+              const int axis = kKuhn.axis[std::size_t(s)][std::size_t(q)];
+              g(axis) = (double(cell.f[cm[std::size_t(q) + 1]]) - double(cell.f[cm[std::size_t(q)]])) / spacing[axis];
+            }
+            std::array<std::pair<int, int>, 6> edges;
+            int tets[3][4];
+            int count;
             if (np == 1 || nn == 1) {
-              const bool lone_pos = np == 1;
-              const int lone = lone_pos ? P[0] : N[0];
-              const int* others = lone_pos ? N : P;
-              out.tets.push_back({{key(lone, others[0]), key(lone, others[1]), key(lone, others[2]), key(lone, others[3])}, source});
+              const int lone = np == 1 ? P[0] : N[0];
+              const int* others = np == 1 ? N : P;
+              for (int q = 0; q < 4; ++q) edges[std::size_t(q)] = {lone, others[q]};
+              tets[0][0] = 0, tets[0][1] = 1, tets[0][2] = 2, tets[0][3] = 3;
+              count = 1;
             } else {
-              const bool pair_pos = np == 2;
-              const int* pair = pair_pos ? P : N;
-              const int* triple = pair_pos ? N : P;
-              std::array<EdgeKey, 6> pk;
+              const int* pair = np == 2 ? P : N;
+              const int* triple = np == 2 ? N : P;
+              std::array<int, 6> ids;
               for (int q = 0; q < 3; ++q) {
-                pk[std::size_t(q)] = key(pair[0], triple[q]);
-                pk[std::size_t(q + 3)] = key(pair[1], triple[q]);
+                edges[std::size_t(q)] = {pair[0], triple[q]};
+                edges[std::size_t(q) + 3] = {pair[1], triple[q]};
               }
-              prism_tets.clear();
-              split_prism(pk, prism_tets);
-              for (const auto& t : prism_tets)
-                out.tets.push_back({{pk[std::size_t(t[0])], pk[std::size_t(t[1])], pk[std::size_t(t[2])], pk[std::size_t(t[3])]}, source});
-              ++out.prisms;
+              for (int q = 0; q < 6; ++q) ids[std::size_t(q)] = vid(edges[std::size_t(q)].first, edges[std::size_t(q)].second);
+              count = split_prism(ids, tets);
+            }
+            for (int t = 0; t < count; ++t) {
+              int v[4];
+              Eigen::Vector4d p[4];
+              for (int q = 0; q < 4; ++q) {
+                const auto& e = edges[std::size_t(tets[t][q])];
+                v[q] = vid(e.first, e.second);
+                p[q] = point(e.first, e.second);
+              }
+              const Eigen::Vector4d n = cross4(p[1] - p[0], p[2] - p[0], p[3] - p[0]);
+              if (n.dot(g) < 0.0) std::swap(v[2], v[3]);
+              const double volume = n.norm() / 6.0;
+              chunk_min[std::size_t(c)] = std::min(chunk_min[std::size_t(c)], volume);
+              chunk_sum[std::size_t(c)] += volume;
+              chunk_degenerate[std::size_t(c)] += volume <= degenerate_volume;
+              mesh.T.row(row) << v[0], v[1], v[2], v[3];
+              mesh.source_cell[std::size_t(row)] = source_base + s;
+              ++row;
             }
           }
         }
-      }
     }
   });
 
-  std::size_t tet_count = 0;
-  for (const auto& o : outputs) {
-    tet_count += o.tets.size();
-    result.active_cells += o.active_cells;
-    result.prisms += o.prisms;
+  double min_volume = std::numeric_limits<double>::infinity(), total_volume = 0.0;
+  for (std::int64_t c = 0; c < chunks; ++c) {
+    min_volume = std::min(min_volume, chunk_min[std::size_t(c)]);
+    total_volume += chunk_sum[std::size_t(c)];
+    result.degenerate_tets += chunk_degenerate[std::size_t(c)];
   }
-  if (tet_count == 0) throw TopologyError("extract_hypersurface: the morph field has no zero crossing in the lattice");
-
-  // Vertex ids are the ranks of the distinct edge keys: a deterministic numbering.
-  std::vector<EdgeKey> keys;
-  keys.reserve(tet_count * 4);
-  for (const auto& o : outputs)
-    for (const auto& t : o.tets) keys.insert(keys.end(), t.key.begin(), t.key.end());
-  tbb::parallel_sort(keys.begin(), keys.end());
-  keys.erase(std::unique(keys.begin(), keys.end()), keys.end());
-
-  mesh.T.resize(Eigen::Index(tet_count), 4);
-  mesh.source_cell.resize(tet_count);
-  {
-    std::size_t row = 0;
-    for (auto& o : outputs) {
-      for (const auto& t : o.tets) {
-        for (int q = 0; q < 4; ++q)
-          mesh.T(Eigen::Index(row), q) =
-              int(std::lower_bound(keys.begin(), keys.end(), t.key[std::size_t(q)]) - keys.begin());
-        mesh.source_cell[row++] = t.source;
-      }
-      std::vector<LocalTet>().swap(o.tets);
-    }
-  }
-
-  // Crossing positions: linear interpolation of the (snapped) lattice values along each edge.
-  const Eigen::Index nv = Eigen::Index(keys.size());
-  mesh.V.resize(nv, 4);
-  mesh.side.assign(keys.size(), VertexSide::Interior);
-  tbb::parallel_for(tbb::blocked_range<Eigen::Index>(0, nv), [&](const tbb::blocked_range<Eigen::Index>& range) {
-    for (Eigen::Index v = range.begin(); v != range.end(); ++v) {
-      const std::int64_t lo = std::int64_t(keys[std::size_t(v)] >> 4);
-      const int mask = int(keys[std::size_t(v)] & 15u);
-      const std::int64_t idx3 = lo % lat.n3;
-      const int level = int(lo / lat.n3);
-      const int i = int(idx3 % dims.x()), j = int((idx3 / dims.x()) % dims.y()), k = int(idx3 / (std::int64_t(dims.x()) * dims.y()));
-      std::int64_t hi3 = idx3;
-      for (int a = 0; a < 3; ++a)
-        if (mask & (1 << a)) hi3 += stride[a];
-      const int hi_level = level + ((mask & 8) ? 1 : 0);
-      const double f0 = lat.value(idx3, level), f1 = lat.value(hi3, hi_level);
-      const double w = f0 / (f0 - f1);
-      const Eigen::Vector3d p0 = field.point(i, j, k);
-      Eigen::Vector4d q;
-      q.head<3>() = p0;
-      q(3) = level * lat.dt_len;
-      for (int a = 0; a < 4; ++a)
-        if (mask & (1 << a)) q(a) += w * spacing[a];
-      mesh.V.row(v) = q.transpose();
-      if (level == 0 && hi_level == 0) mesh.side[std::size_t(v)] = VertexSide::A;
-      if (level == lat.K) mesh.side[std::size_t(v)] = VertexSide::B;
-    }
-  });
-
-  // Orientation: cross4 of each tet must point where d increases. Inside one Kuhn simplex the
-  // linear interpolant's gradient has component (f[m+1] - f[m]) / spacing along the axis added at step m.
-  std::vector<double> volumes(tet_count);
-  tbb::parallel_for(tbb::blocked_range<std::size_t>(0, tet_count), [&](const tbb::blocked_range<std::size_t>& range) {
-    for (std::size_t t = range.begin(); t != range.end(); ++t) {
-      const std::int64_t base = mesh.source_cell[t] / 24;
-      const int s = int(mesh.source_cell[t] % 24);
-      const std::int64_t idx3 = base % lat.n3;
-      const int level = int(base / lat.n3);
-      Eigen::Vector4d g;
-      double fprev = lat.value(idx3, level);
-      std::int64_t cur3 = idx3;
-      int cur_level = level;
-      for (int m = 0; m < 4; ++m) {
-        const int a = kKuhn.axis[std::size_t(s)][std::size_t(m)];
-        if (a == 3) ++cur_level; else cur3 += stride[a];
-        const double fnext = lat.value(cur3, cur_level);
-        g(a) = (fnext - fprev) / spacing[a];
-        fprev = fnext;
-      }
-      auto row = mesh.T.row(Eigen::Index(t));
-      const Eigen::Vector4d v0 = mesh.V.row(row(0)).transpose();
-      const Eigen::Vector4d n = cross4(mesh.V.row(row(1)).transpose() - v0, mesh.V.row(row(2)).transpose() - v0,
-                                       mesh.V.row(row(3)).transpose() - v0);
-      if (n.dot(g) < 0.0) std::swap(row(2), row(3));
-      volumes[t] = n.norm() / 6.0;
-    }
-  });
-
-  double mean_volume = 0.0, min_volume = std::numeric_limits<double>::infinity();
-  for (double v : volumes) {
-    mean_volume += v;
-    min_volume = std::min(min_volume, v);
-  }
-  mean_volume /= double(tet_count);
-  for (double v : volumes)
-    if (v <= 1e-12 * mean_volume) ++result.degenerate_tets;
+  const double mean_volume = total_volume / double(tet_count);
   result.min_volume_ratio = mean_volume > 0.0 ? min_volume / mean_volume : 0.0;
   result.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
   return result;

@@ -3,6 +3,7 @@
 #pragma once
 
 #include <cstdint>
+#include <functional>
 
 #include "mesh/morph.h"
 #include "mesh/tet_mesh4.h"
@@ -14,16 +15,21 @@ struct ExtractOptions {
   double time_scale = 0.0;      ///< c (length per unit t); <= 0 selects the default c = K * h (cubic lattice cells)
   double zero_snap = 1e-2;      ///< |d| < zero_snap * h moves to +-zero_snap * h: crossings stay off lattice points
                                 ///< (1e-3 left slivers that cost the Laplace solve ~100x in conditioning)
+  /// Called once the exact tet and vertex counts are known, before the mesh arrays are allocated; may
+  /// throw (the pipeline's --max-memory guard does). Empty = no check.
+  std::function<void(std::int64_t tets, std::int64_t vertices)> before_allocate;
 };
 
 struct ExtractResult {
   TetMesh4 mesh;
   double seconds = 0.0;
+  std::int64_t candidate_cubes = 0;   ///< spatial lattice cubes where d can change sign at some t (the only ones visited)
   std::int64_t active_cells = 0;      ///< 4D hypercubes with a sign change
   std::int64_t snapped_values = 0;    ///< values of dA and dB within zero_snap of zero (moved off zero)
   std::int64_t prisms = 0;            ///< pentatopes cut in a prism (2|3 split), 3 tets each
-  std::int64_t degenerate_tets = 0;   ///< tets of (near) zero volume kept in the mesh
+  std::int64_t degenerate_tets = 0;   ///< tets with 3-volume below 1e-12 h^3, kept (they add nothing to the Laplacian)
   double min_volume_ratio = 0.0;      ///< smallest tet volume / mean tet volume
+  std::int64_t scratch_bytes = 0;     ///< per-cell tables used besides the output mesh
 };
 
 /// Extracts the tetrahedral mesh; throws TopologyError when the morph has no zero crossing.
