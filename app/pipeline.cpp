@@ -197,8 +197,9 @@ PipelineResult run_pipeline(const PipelineOptions& options) {
   report["extract"] = {{"active_cells", extract.active_cells},
                        {"prisms", extract.prisms},
                        {"snapped_values", extract.snapped_values},
+                       {"candidate_cubes", extract.candidate_cubes},
                        {"degenerate_tets", extract.degenerate_tets},
-                       {"min_volume_ratio", extract.min_volume_ratio}};
+                       {"scratch_bytes", extract.scratch_bytes}};
   report["solver"] = {{"name", laplace.report.backend},
                       {"iterations", laplace.report.iterations},
                       {"residual", laplace.report.residual},

@@ -10,7 +10,9 @@ namespace morphmap {
 /// Which end of the morph a vertex lies on.
 enum class VertexSide : std::uint8_t { Interior = 0, A = 1, B = 2 };
 
-/// Row-major index arrays so that one tet's four indices are contiguous.
+/// Row-major arrays so that one vertex's coordinates and one tet's indices share a cache line: every
+/// stage after extraction reads them in mesh (random) order.
+using Points4 = Eigen::Matrix<double, Eigen::Dynamic, 4, Eigen::RowMajor>;
 using TetIndices = Eigen::Matrix<int, Eigen::Dynamic, 4, Eigen::RowMajor>;
 using TriIndices = Eigen::Matrix<int, Eigen::Dynamic, 3, Eigen::RowMajor>;
 
@@ -21,7 +23,7 @@ using TriIndices = Eigen::Matrix<int, Eigen::Dynamic, 3, Eigen::RowMajor>;
 /// solid). Its spatial part is therefore an outward normal of every time slice, which orients the
 /// target surface and slices without storing normals.
 struct TetMesh4 {
-  Eigen::MatrixXd V;                       ///< #V by 4: x, y, z, tau (tau = time_scale * t)
+  Points4 V;                               ///< #V by 4: x, y, z, tau (tau = time_scale * t)
   TetIndices T;                            ///< #T by 4 vertex indices, oriented as above
   std::vector<std::int64_t> source_cell;   ///< #T: 24 * (linear index of the 4D lattice cell) + Kuhn simplex 0..23
   std::vector<VertexSide> side;            ///< #V: A for t = 0, B for t = 1, Interior otherwise
@@ -36,6 +38,14 @@ struct TetMesh4 {
 };
 
 /// Generalised cross product in R^4: the vector orthogonal to a, b, c with det[a b c n] = |n|^2.
-Eigen::Vector4d cross4(const Eigen::Vector4d& a, const Eigen::Vector4d& b, const Eigen::Vector4d& c);
+/// Its length is the 3-volume of the parallelepiped (6 times the tet's). Closed form via the 2x2 minors
+/// of (b, c), because extraction calls it for every output tet.
+inline Eigen::Vector4d cross4(const Eigen::Vector4d& a, const Eigen::Vector4d& b, const Eigen::Vector4d& c) {
+  const double m01 = b(0) * c(1) - b(1) * c(0), m02 = b(0) * c(2) - b(2) * c(0), m03 = b(0) * c(3) - b(3) * c(0);
+  const double m12 = b(1) * c(2) - b(2) * c(1), m13 = b(1) * c(3) - b(3) * c(1), m23 = b(2) * c(3) - b(3) * c(2);
+  // n_i is the cofactor of e_i in det[a b c e_i] (expansion along the last column).
+  return Eigen::Vector4d(-(a(1) * m23 - a(2) * m13 + a(3) * m12), a(0) * m23 - a(2) * m03 + a(3) * m02,
+                         -(a(0) * m13 - a(1) * m03 + a(3) * m01), a(0) * m12 - a(1) * m02 + a(2) * m01);
+}
 
 }  // namespace morphmap

@@ -27,7 +27,7 @@ constexpr double kCancellationRatio = 1e-12;
 
 GradientResult compute_gradient(const TetMesh4& mesh, const Eigen::VectorXd& s) {
   const auto start = std::chrono::steady_clock::now();
-  const Eigen::MatrixXd& V = mesh.V;
+  const Points4& V = mesh.V;
   const TetIndices& T = mesh.T;
   const Eigen::Index n = V.rows();
   const Eigen::Index tets = T.rows();

@@ -34,7 +34,7 @@ constexpr double kDegenerateGramRatio = 1e-14;
 // setFromTriplets, is the same for any thread count.
 constexpr Eigen::Index kChunkTets = 8192;
 
-void check_mesh_arrays(const Eigen::MatrixXd& V, const TetIndices& T, const char* who) {
+void check_mesh_arrays(const Points4& V, const TetIndices& T, const char* who) {
   if (V.cols() != 4) {
     std::ostringstream msg;
     msg << who << ": vertex array has " << V.cols() << " columns, expected 4 (x, y, z, tau)";
@@ -117,7 +117,7 @@ class DisjointSets {
 
 }  // namespace
 
-bool tet_frame(const Eigen::MatrixXd& V, const TetIndices& T, Eigen::Index t, Eigen::Matrix<double, 4, 3>& E,
+bool tet_frame(const Points4& V, const TetIndices& T, Eigen::Index t, Eigen::Matrix<double, 4, 3>& E,
                Eigen::Matrix3d& gram_inverse, double& volume) {
   const Eigen::Vector4d v0 = V.row(T(t, 0)).transpose();
   for (int k = 0; k < 3; ++k) E.col(k) = V.row(T(t, k + 1)).transpose() - v0;
@@ -134,7 +134,7 @@ bool tet_frame(const Eigen::MatrixXd& V, const TetIndices& T, Eigen::Index t, Ei
   return true;
 }
 
-void barycentric_gradients(const Eigen::MatrixXd& V, const TetIndices& T, Eigen::MatrixXd& G, Eigen::VectorXd& vol) {
+void barycentric_gradients(const Points4& V, const TetIndices& T, Eigen::MatrixXd& G, Eigen::VectorXd& vol) {
   check_mesh_arrays(V, T, "barycentric_gradients");
   const Eigen::Index tets = T.rows();
   G.setZero(4 * tets, 4);
@@ -153,7 +153,7 @@ void barycentric_gradients(const Eigen::MatrixXd& V, const TetIndices& T, Eigen:
   });
 }
 
-SparseMatrixD cotangent_stiffness(const Eigen::MatrixXd& V, const TetIndices& T) {
+SparseMatrixD cotangent_stiffness(const Points4& V, const TetIndices& T) {
   Eigen::MatrixXd G;
   Eigen::VectorXd vol;
   barycentric_gradients(V, T, G, vol);
@@ -162,7 +162,7 @@ SparseMatrixD cotangent_stiffness(const Eigen::MatrixXd& V, const TetIndices& T)
 
 LaplaceResult solve_harmonic(const TetMesh4& mesh, const LaplaceOptions& options) {
   const auto start = Clock::now();
-  const Eigen::MatrixXd& V = mesh.V;
+  const Points4& V = mesh.V;
   const TetIndices& T = mesh.T;
   const Eigen::Index n = V.rows();
   check_mesh_arrays(V, T, "solve_harmonic");

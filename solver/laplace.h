@@ -15,20 +15,20 @@ namespace morphmap {
 /// the 3-volume sqrt(det E^T E) / 6. Returns false (volume 0, gram_inverse unset) for a degenerate tet, one
 /// whose det E^T E is at rounding level relative to the product of its squared edge lengths: such a tet
 /// has no usable hull and every stage skips it.
-bool tet_frame(const Eigen::MatrixXd& V, const TetIndices& T, Eigen::Index t, Eigen::Matrix<double, 4, 3>& E,
+bool tet_frame(const Points4& V, const TetIndices& T, Eigen::Index t, Eigen::Matrix<double, 4, 3>& E,
                Eigen::Matrix3d& gram_inverse, double& volume);
 
 /// Barycentric gradients and volumes of every tet, computed in the tet's own 3D hull from the Gram
 /// matrix of its edge vectors (no 3D embedding needed).
 /// G: #T*4 by 4, row 4*t + i is the gradient (in R^4) of the hat function of T(t, i). vol: #T.
 /// Degenerate tets (see tet_frame) get zero gradients and zero volume, so they contribute nothing.
-void barycentric_gradients(const Eigen::MatrixXd& V, const TetIndices& T, Eigen::MatrixXd& G, Eigen::VectorXd& vol);
+void barycentric_gradients(const Points4& V, const TetIndices& T, Eigen::MatrixXd& G, Eigen::VectorXd& vol);
 
 /// P1 stiffness matrix K = sum over tets of vol * G_t^T G_t (#V by #V, symmetric positive semidefinite,
 /// rows sum to zero). Off-diagonals equal -(1/6) l_kl cot(theta_kl) summed over tets of edge ij.
 /// Assembly is TBB-parallel over fixed chunks of tets, each writing its own slice of one triplet buffer in
 /// chunk order, so K is bitwise the same for any thread count.
-SparseMatrixD cotangent_stiffness(const Eigen::MatrixXd& V, const TetIndices& T);
+SparseMatrixD cotangent_stiffness(const Points4& V, const TetIndices& T);
 
 struct LaplaceOptions {
   std::string solver = "cg";       ///< backend name for make_solver (cg: 6x faster than cholmod on the demo, 3.6 s vs 23 s)
