@@ -44,6 +44,10 @@ void add_pipeline_options(CLI::App& cmd, PipelineOptions& o) {
       ->capture_default_str();
   cmd.add_flag("--ply", o.write_ply, "Also write target.ply");
   cmd.add_option("--threads", o.threads, "Worker threads (0 = all cores)")->check(CLI::NonNegativeNumber);
+  cmd.add_option_function<std::string>(
+         "--max-memory", [&o](const std::string& text) { o.max_memory_bytes = morphmap::parse_memory_size(text); },
+         "Refuse a run whose estimated peak memory exceeds SIZE (e.g. 8G, 512M)")
+      ->type_name("SIZE");
 }
 
 }  // namespace
@@ -73,6 +77,9 @@ int main(int argc, char** argv) {
   } catch (const CLI::CallForAllHelp& e) {
     return app.exit(e);
   } catch (const CLI::ParseError& e) {
+    std::cerr << "morphmap: " << e.what() << '\n';
+    return 2;
+  } catch (const morphmap::Error& e) {  // option values parsed by morphmap itself (--max-memory)
     std::cerr << "morphmap: " << e.what() << '\n';
     return 2;
   }

@@ -87,7 +87,42 @@ void write_labels(const std::string& path, const Eigen::MatrixXd& labels) {
   if (!out) throw IoError(path + ": write failed");
 }
 
+constexpr double kGiB = 1024.0 * 1024.0 * 1024.0;
+
+std::string gib(double bytes) {
+  std::ostringstream s;
+  s << std::setprecision(3) << bytes / kGiB << " GiB";
+  return s.str();
+}
+
 }  // namespace
+
+long long estimate_peak_memory(std::int64_t lattice_points, std::int64_t tets, std::int64_t vertices) {
+  // Measured peaks (report.json peak_memory_bytes) are dominated by the Laplace assembly's triplets
+  // and the sparse matrix (per tet), then by the per-vertex solver, gradient and transport arrays.
+  constexpr double kBase = 160e6, kPerLatticePoint = 12.0, kPerTet = 560.0, kPerVertex = 600.0;
+  return (long long)(kBase + kPerLatticePoint * double(lattice_points) + kPerTet * double(tets) +
+                     kPerVertex * double(vertices));
+}
+
+long long parse_memory_size(const std::string& text) {
+  std::size_t used = 0;
+  double value = 0.0;
+  try {
+    value = std::stod(text, &used);
+  } catch (const std::exception&) {
+    throw InvalidInput("--max-memory: cannot read '" + text + "' (examples: 8G, 512M, 2000000000)");
+  }
+  const std::string unit = text.substr(used);
+  double scale = 1.0;
+  if (unit == "K" || unit == "k") scale = 1024.0;
+  else if (unit == "M" || unit == "m") scale = 1024.0 * 1024.0;
+  else if (unit == "G" || unit == "g") scale = kGiB;
+  else if (unit == "T" || unit == "t") scale = 1024.0 * kGiB;
+  else if (!unit.empty()) throw InvalidInput("--max-memory: unknown unit in '" + text + "' (use K, M, G or T)");
+  if (!(value > 0.0) || !std::isfinite(value)) throw InvalidInput("--max-memory: '" + text + "' is not a positive size");
+  return (long long)(value * scale);
+}
 
 PipelineResult run_pipeline(const PipelineOptions& options) {
   const auto start_total = Clock::now();
@@ -118,7 +153,16 @@ PipelineResult run_pipeline(const PipelineOptions& options) {
   seconds["morph"] = morph.seconds;
   progress.stage("morph", morph.seconds);
 
-  ExtractResult extract = extract_hypersurface(morph.field, options.extract);
+  long long memory_estimate = 0;
+  ExtractOptions extract_options = options.extract;
+  extract_options.before_allocate = [&](std::int64_t tets, std::int64_t vertices) {
+    memory_estimate = estimate_peak_memory(morph.lattice_points, tets, vertices);
+    if (options.max_memory_bytes > 0 && memory_estimate > options.max_memory_bytes)
+      throw InvalidInput("--max-memory: this run needs about " + gib(double(memory_estimate)) + " (" +
+                         std::to_string(tets) + " tets, " + std::to_string(vertices) + " vertices), over the limit of " +
+                         gib(double(options.max_memory_bytes)) + "; lower --voxels or --time-steps");
+  };
+  ExtractResult extract = extract_hypersurface(morph.field, extract_options);
   seconds["extract"] = extract.seconds;
   progress.stage("extract", extract.seconds);
   const TetMesh4& mesh = extract.mesh;
@@ -184,6 +228,7 @@ PipelineResult run_pipeline(const PipelineOptions& options) {
                        {"align", options.align},
                        {"slices", options.slices},
                        {"threads", options.threads},
+                       {"max_memory_bytes", options.max_memory_bytes},
                        {"output_dir", options.output_dir}};
   report["counts"] = {{"vertices", mesh.vertex_count()},
                       {"tets", mesh.tet_count()},
@@ -254,6 +299,7 @@ PipelineResult run_pipeline(const PipelineOptions& options) {
     seconds["write"] = seconds_since(start);
     seconds["total"] = seconds_since(start_total);
     report["peak_memory_bytes"] = peak_memory_bytes();
+    report["memory_estimate_bytes"] = memory_estimate;
     result.report_json = report.dump(2);
     std::ofstream(out.staged("report.json")) << result.report_json << '\n';
     out.commit({"report.json"});
@@ -262,6 +308,7 @@ PipelineResult run_pipeline(const PipelineOptions& options) {
     seconds["write"] = 0.0;
     seconds["total"] = seconds_since(start_total);
     report["peak_memory_bytes"] = peak_memory_bytes();
+    report["memory_estimate_bytes"] = memory_estimate;
     result.report_json = report.dump(2);
   }
   return result;

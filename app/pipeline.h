@@ -25,6 +25,7 @@ struct PipelineOptions {
   std::vector<double> slices;      ///< morph times in (0, 1) at which to write slice_<t>.obj
   bool write_ply = false;          ///< also write target.ply
   int threads = 0;                 ///< worker threads; 0 = all cores
+  long long max_memory_bytes = 0;  ///< refuse (InvalidInput) a run whose estimated peak memory exceeds this; 0 = no limit
   bool progress = false;           ///< print stage names and times to stderr
 };
 
@@ -37,6 +38,13 @@ struct PipelineResult {
   std::int64_t mesh_tets = 0;
   std::int64_t fallbacks = 0;       ///< transport fallbacks
 };
+
+/// Estimated peak resident memory of a whole run (bytes) from the lattice size and the exact mesh counts
+/// known after extraction's counting pass. Coefficients measured on sphere -> torus/bunny and cow -> horse.
+long long estimate_peak_memory(std::int64_t lattice_points, std::int64_t tets, std::int64_t vertices);
+
+/// Parses "123", "512M", "8G", "1.5T" (binary units) into bytes; throws InvalidInput naming the text.
+long long parse_memory_size(const std::string& text);
 
 /// Runs every stage and writes the outputs (target.obj, labels.txt, slices, report.json) atomically
 /// into options.output_dir. Throws InvalidInput / IoError / TopologyError / SolverError.

@@ -98,6 +98,12 @@ TEST_F(Cli, UnknownOptionValues) {
   expect_rejected("sphere:radius=2 torus", "radius");
 }
 
+TEST_F(Cli, MemoryGuardRefusesBeforeAllocating) {
+  expect_rejected("sphere torus --max-memory 100M", "--max-memory");
+  expect_rejected("sphere torus --max-memory lots", "lots");
+  expect_rejected("sphere torus --max-memory 5Q", "5Q");
+}
+
 TEST_F(Cli, HelpOnEveryCommand) {
   for (const char* cmd : {"--help", "map --help", "demo --help"}) {
     const CommandRun r = run_command(cmd);
