@@ -1,0 +1,49 @@
+// Quality of the tetrahedral 3-manifold in R^4 for the Laplace stage. Dinh, Yezzi and Turk (TOG 2005, §10)
+// note that obtuse dihedral angles give negative cotangent weights in the Laplace-Beltrami operator
+// (equation 4), so the update of s stops being a convex combination and diffusion can become unstable; the
+// distance-field morph (DFM, §9) produces more of them. This stage measures how many there are.
+#pragma once
+
+#include <cstdint>
+#include <vector>
+
+#include "mesh/tet_mesh4.h"
+
+namespace morphmap {
+
+struct QualityOptions {
+  double obtuse_threshold_degrees = 90.0;  ///< dihedrals above this count as obtuse; 90 is where the cotangent weight turns
+                                           ///< negative. Angles within 1e-9 degrees of it are not counted, so the exact
+                                           ///< right angles of lattice (Kuhn) tets stay acute despite rounding
+  int histogram_bins = 18;                 ///< dihedral histogram over [0, 180] degrees (18: 10 degree bins), >= 1
+};
+
+struct QualityResult {
+  std::int64_t tets = 0;
+  std::int64_t degenerate_tets = 0;        ///< 3-volume <= 1e-12 * mean volume (or non-finite): left out of every
+                                           ///< statistic below except min_volume_ratio
+  double min_dihedral_degrees = 0.0;       ///< over non-degenerate tets (0 if there are none)
+  double max_dihedral_degrees = 0.0;       ///< over non-degenerate tets (0 if there are none)
+  std::int64_t obtuse_dihedrals = 0;       ///< dihedral angles above the threshold
+  double obtuse_dihedral_fraction = 0.0;   ///< obtuse_dihedrals / (6 * non-degenerate tets)
+  std::int64_t edges = 0;                  ///< unique vertex pairs of non-degenerate tets
+  std::int64_t negative_cotangent_edges = 0;   ///< edges whose assembled off-diagonal K_ij > 1e-14 * mean |K_ij|
+  double negative_cotangent_fraction = 0.0;    ///< negative_cotangent_edges / edges. K_ij = sum over the tets of edge
+                                               ///< ij of vol * grad(lambda_i) . grad(lambda_j) = -(1/6) sum l cot(theta),
+                                               ///< so K_ij > 0 is a negative cotangent weight
+  double min_volume_ratio = 0.0;           ///< smallest tet 3-volume / mean 3-volume, degenerate tets included
+  std::vector<std::int64_t> dihedral_histogram;  ///< histogram_bins counts of the non-degenerate dihedrals; bin b holds
+                                                 ///< [b, b + 1) * 180 / bins degrees, 180 itself in the last bin
+  double seconds = 0.0;
+};
+
+/// Dihedral angles, degenerate tets and the sign of the assembled cotangent stiffness of every edge.
+/// Each tet is measured in its own 3D hull: the R factor of a Householder QR of E = [v1 - v0, v2 - v0, v3 - v0]
+/// (4 by 3) gives 3D coordinates, in which face normals and the volume are cross products and a triple product,
+/// accurate for slivers (the Gram matrix E^T E squares their condition number).
+/// TBB-parallel over fixed chunks with reductions in chunk order: the result is the same for any thread count.
+/// Temporary memory: 8 bytes per tet plus 12 bytes per tet edge (~80 bytes per tet) plus 16 bytes per vertex.
+/// Throws InvalidInput for out-of-range indices or invalid options.
+QualityResult measure_quality(const TetMesh4& mesh, const QualityOptions& options = {});
+
+}  // namespace morphmap
