@@ -160,7 +160,7 @@ TEST(LaplaceStiffness, RejectsBadIndices) {
   TetIndices T(1, 4);
   T << 0, 1, 2, 3;
   EXPECT_THROW(cotangent_stiffness(V, T), InvalidInput);
-  EXPECT_THROW(cotangent_stiffness(Eigen::MatrixXd::Zero(4, 3), T), InvalidInput);
+  // A V with other than 4 columns no longer compiles: Points4 fixes the column count.
 }
 
 class LaplaceHarmonic : public ::testing::TestWithParam<std::string> {
