@@ -39,7 +39,8 @@ void add_pipeline_options(CLI::App& cmd, PipelineOptions& o) {
       ->check(CLI::PositiveNumber)
       ->capture_default_str();
   cmd.add_option("--slices", o.slices, "Morph times in (0,1) at which to write slice_<t>.obj")->delimiter(',');
-  cmd.add_option("--align", o.align, "none: meshes in their own coordinates; bbox: both normalised, outputs in the target's")
+  cmd.add_option("--align", o.align,
+                 "none: meshes in their own coordinates; bbox: both normalised, outputs in the target's")
       ->check(CLI::IsMember({"none", "bbox"}))
       ->capture_default_str();
   cmd.add_flag("--ply", o.write_ply, "Also write target.ply");
@@ -98,13 +99,10 @@ int main(int argc, char** argv) {
                    options.output_dir.c_str(), (long long)result.target.V.rows(), (long long)result.mesh_tets,
                    (long long)result.fallbacks);
     return 0;
-  } catch (const morphmap::InvalidInput& e) {
+  } catch (const morphmap::SolverError& e) {  // not the user's input: a numerical failure
     std::cerr << "morphmap: " << e.what() << '\n';
-    return 2;
-  } catch (const morphmap::IoError& e) {
-    std::cerr << "morphmap: " << e.what() << '\n';
-    return 2;
-  } catch (const morphmap::TopologyError& e) {
+    return 1;
+  } catch (const morphmap::Error& e) {  // bad input, unreadable file, unusable mesh, resource guard
     std::cerr << "morphmap: " << e.what() << '\n';
     return 2;
   } catch (const std::exception& e) {

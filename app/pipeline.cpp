@@ -20,6 +20,7 @@
 #include "io/mesh_io.h"
 #include "io/output_dir.h"
 #include "mesh/errors.h"
+#include "mesh/quality.h"
 #include "mesh/shapes.h"
 #include "mesh/transfer.h"
 #include "solver/gradient.h"
@@ -167,6 +168,10 @@ PipelineResult run_pipeline(const PipelineOptions& options) {
   progress.stage("extract", extract.seconds);
   const TetMesh4& mesh = extract.mesh;
 
+  const QualityResult quality = measure_quality(mesh);
+  seconds["quality"] = quality.seconds;
+  progress.stage("quality", quality.seconds);
+
   const LaplaceResult laplace = solve_harmonic(mesh, options.laplace);
   seconds["laplace"] = laplace.seconds;
   progress.stage("laplace", laplace.seconds);
@@ -245,6 +250,20 @@ PipelineResult run_pipeline(const PipelineOptions& options) {
                        {"candidate_cubes", extract.candidate_cubes},
                        {"degenerate_tets", extract.degenerate_tets},
                        {"scratch_bytes", extract.scratch_bytes}};
+  report["mesh_quality"] = {
+      {"tets", quality.tets},
+      {"degenerate_tets", quality.degenerate_tets},
+      {"degenerate_handling",
+       "lattice values within zero_snap * voxel of zero moved to +-zero_snap * voxel (snapped_values) so no crossing "
+       "lands on a lattice point; tets that are still degenerate are kept, contribute nothing to the Laplacian and "
+       "are left out of the angle statistics"},
+      {"snapped_values", extract.snapped_values},
+      {"min_dihedral_degrees", quality.min_dihedral_degrees},
+      {"max_dihedral_degrees", quality.max_dihedral_degrees},
+      {"obtuse_dihedral_fraction", quality.obtuse_dihedral_fraction},
+      {"negative_cotangent_fraction", quality.negative_cotangent_fraction},
+      {"min_volume_ratio", quality.min_volume_ratio},
+      {"dihedral_histogram_10deg", quality.dihedral_histogram}};
   report["solver"] = {{"name", laplace.report.backend},
                       {"iterations", laplace.report.iterations},
                       {"residual", laplace.report.residual},
@@ -263,28 +282,30 @@ PipelineResult run_pipeline(const PipelineOptions& options) {
                          {"cycle_breaks", transport.cycle_breaks},
                          {"wavefronts", transport.wavefronts}};
 
+  // Outputs are staged first and report.json (which says the run is complete) is staged last.
+  std::optional<OutputDir> out;
+  start = Clock::now();
   if (!options.output_dir.empty()) {
-    start = Clock::now();
-    OutputDir out(options.output_dir);
+    out.emplace(options.output_dir);
     std::string mtl_name;
     if (A.has_uv() && A.has_texture()) {
       std::string texture_name = "texture.png";
       if (A.texture) {
-        write_png(out.staged(texture_name), *A.texture);
+        write_png(out->staged(texture_name), *A.texture);
       } else {
         texture_name = "texture" + std::filesystem::path(A.texture_path).extension().string();
         std::error_code ec;
-        std::filesystem::copy_file(A.texture_path, out.staged(texture_name),
+        std::filesystem::copy_file(A.texture_path, out->staged(texture_name),
                                    std::filesystem::copy_options::overwrite_existing, ec);
         if (ec) throw IoError(A.texture_path + ": cannot copy texture (" + ec.message() + ")");
       }
       mtl_name = "target.mtl";
-      write_mtl(out.staged(mtl_name), texture_name);
+      write_mtl(out->staged(mtl_name), texture_name);
     }
     const TriIndices no_fuv;
-    write_obj(out.staged("target.obj"), target_positions, result.target.F, result.target_uv, no_fuv, mtl_name);
-    if (options.write_ply) write_ply(out.staged("target.ply"), target_positions, result.target.F, result.target_uv);
-    write_labels(out.staged("labels.txt"), result.target_labels);
+    write_obj(out->staged("target.obj"), target_positions, result.target.F, result.target_uv, no_fuv, mtl_name);
+    if (options.write_ply) write_ply(out->staged("target.ply"), target_positions, result.target.F, result.target_uv);
+    write_labels(out->staged("labels.txt"), result.target_labels);
     nlohmann::json slice_report = nlohmann::json::array();
     for (const SliceOut& s : slices) {
       // Intermediate shapes live between A's and B's frames; interpolate the similarity.
@@ -292,24 +313,20 @@ PipelineResult run_pipeline(const PipelineOptions& options) {
       frame.center = (1.0 - s.t) * frame_a.center + s.t * frame_b.center;
       frame.scale = (1.0 - s.t) * frame_a.scale + s.t * frame_b.scale;
       const std::string name = "slice_" + format_time(s.t) + ".obj";
-      write_obj(out.staged(name), frame.to_world(s.mesh.V), s.mesh.F, s.uv, no_fuv, mtl_name);
+      write_obj(out->staged(name), frame.to_world(s.mesh.V), s.mesh.F, s.uv, no_fuv, mtl_name);
       slice_report.push_back({{"t", s.t}, {"file", name}, {"vertices", s.mesh.V.rows()}, {"triangles", s.mesh.F.rows()}});
     }
     report["slices"] = slice_report;
-    seconds["write"] = seconds_since(start);
-    seconds["total"] = seconds_since(start_total);
-    report["peak_memory_bytes"] = peak_memory_bytes();
-    report["memory_estimate_bytes"] = memory_estimate;
-    result.report_json = report.dump(2);
-    std::ofstream(out.staged("report.json")) << result.report_json << '\n';
-    out.commit({"report.json"});
+  }
+  seconds["write"] = seconds_since(start);
+  seconds["total"] = seconds_since(start_total);
+  report["peak_memory_bytes"] = peak_memory_bytes();
+  report["memory_estimate_bytes"] = memory_estimate;
+  result.report_json = report.dump(2);
+  if (out) {
+    write_text_atomically(out->staged("report.json"), result.report_json + "\n");
+    out->commit({"report.json"});
     progress.stage("write", seconds["write"]);
-  } else {
-    seconds["write"] = 0.0;
-    seconds["total"] = seconds_since(start_total);
-    report["peak_memory_bytes"] = peak_memory_bytes();
-    report["memory_estimate_bytes"] = memory_estimate;
-    result.report_json = report.dump(2);
   }
   return result;
 }

@@ -20,22 +20,11 @@
 namespace {
 
 morphmap::MorphField sphere_to_torus(int n) {
-  morphmap::MorphField field;
-  const double extent = 1.1;
-  field.voxel_size = 2.0 * extent / (n - 1);
-  field.dims = Eigen::Vector3i(n, n, n);
-  field.origin = Eigen::Vector3d::Constant(-extent);
-  field.dA.resize(std::size_t(n) * n * n);
-  field.dB.resize(field.dA.size());
-  for (int k = 0; k < n; ++k)
-    for (int j = 0; j < n; ++j)
-      for (int i = 0; i < n; ++i) {
-        const Eigen::Vector3d p = field.point(i, j, k);
-        const std::size_t idx = std::size_t(field.index(i, j, k));
-        field.dA[idx] = float(p.norm() - 0.9);
-        field.dB[idx] = float(Eigen::Vector2d(p.head<2>().norm() - 0.6, p.z()).norm() - 0.25);
-      }
-  return field;
+  return morphmap::sample_morph([](const Eigen::Vector3d& p) { return p.norm() - 0.9; },
+                                [](const Eigen::Vector3d& p) {
+                                  return Eigen::Vector2d(p.head<2>().norm() - 0.6, p.z()).norm() - 0.25;
+                                },
+                                1.1, n);
 }
 
 std::string models_dir() {

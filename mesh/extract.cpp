@@ -14,16 +14,17 @@
 #include "mesh/extract.h"
 
 #include <tbb/blocked_range.h>
+#include <tbb/enumerable_thread_specific.h>
 #include <tbb/parallel_for.h>
 
 #include <Eigen/Dense>
 #include <algorithm>
 #include <array>
-#include <memory>
-#include <tuple>
 #include <chrono>
 #include <cmath>
 #include <limits>
+#include <memory>
+#include <tuple>
 
 #include "mesh/errors.h"
 
@@ -144,10 +145,11 @@ inline int bit_count(std::uint32_t x) {
 ExtractResult extract_hypersurface(const MorphField& field, const ExtractOptions& options) {
   const auto start = std::chrono::steady_clock::now();
   if (options.time_steps < 1)
-    throw InvalidInput("extract_hypersurface: time_steps must be at least 1 (got " + std::to_string(options.time_steps) +
-                       ")");
+    throw InvalidInput("extract_hypersurface: time_steps must be at least 1 (got " +
+                       std::to_string(options.time_steps) + ")");
   const Eigen::Vector3i& dims = field.dims;
-  if ((dims.array() < 2).any()) throw InvalidInput("extract_hypersurface: lattice has fewer than 2 points along an axis");
+  if ((dims.array() < 2).any())
+    throw InvalidInput("extract_hypersurface: lattice has fewer than 2 points along an axis");
   const std::int64_t n3 = std::int64_t(dims.x()) * dims.y() * dims.z();
   if (field.dA.size() != std::size_t(n3) || field.dB.size() != std::size_t(n3))
     throw InvalidInput("extract_hypersurface: field arrays do not match the lattice dimensions");
@@ -158,8 +160,18 @@ ExtractResult extract_hypersurface(const MorphField& field, const ExtractOptions
   mesh.time_steps = K;
   mesh.voxel_size = field.voxel_size;
   mesh.time_scale = options.time_scale > 0.0 ? options.time_scale : K * field.voxel_size;
-  const Lattice lat{field, K, field.voxel_size, mesh.time_scale / K, options.zero_snap * field.voxel_size, n3, 1,
-                    dims.x(), std::int64_t(dims.x()) * dims.y(), dims.x() - 1, dims.y() - 1, dims.z() - 1};
+  const Lattice lat{field,
+                    K,
+                    field.voxel_size,
+                    mesh.time_scale / K,
+                    options.zero_snap * field.voxel_size,
+                    n3,
+                    1,
+                    dims.x(),
+                    std::int64_t(dims.x()) * dims.y(),
+                    dims.x() - 1,
+                    dims.y() - 1,
+                    dims.z() - 1};
   const double inverse_spacing[4] = {1.0 / lat.h, 1.0 / lat.h, 1.0 / lat.h, 1.0 / lat.dt};
   for (std::size_t q = 0; q < field.dA.size(); ++q)
     result.snapped_values += (std::abs(field.dA[q]) < lat.snap) + (std::abs(field.dB[q]) < lat.snap);
@@ -210,34 +222,40 @@ ExtractResult extract_hypersurface(const MorphField& field, const ExtractOptions
       if (cell.f[b] > 0.0f) cell.positive |= 1u << b;
   };
 
+  // Visits every cell with a sign change, chunk by chunk (chunk = kChunkCubes candidate cubes, all
+  // their time slabs), calling visit(chunk, slot, cell); chunks run in parallel.
+  const std::int64_t chunks = (std::int64_t(candidates.size()) + kChunkCubes - 1) / kChunkCubes;
+  auto for_each_active_cell = [&](auto&& visit) {
+    tbb::parallel_for(tbb::blocked_range<std::int64_t>(0, chunks), [&](const tbb::blocked_range<std::int64_t>& r) {
+      Cell cell;
+      for (std::int64_t c = r.begin(); c != r.end(); ++c) {
+        const std::int64_t end = std::min<std::int64_t>(std::int64_t(candidates.size()), (c + 1) * kChunkCubes);
+        for (std::int64_t o = c * kChunkCubes; o < end; ++o)
+          for (int l = 0; l < K; ++l) {
+            load(o, l, cell, l == 0, cell.f + 8);
+            if (cell.positive != 0 && cell.positive != 0xFFFFu) visit(c, std::size_t(o * K + l), cell);
+          }
+      }
+    });
+  };
+
   // Pass 1: tets and owned crossing edges per cell (slot = ordinal * K + level).
   const std::int64_t slots = std::int64_t(candidates.size()) * K;
   std::vector<std::uint32_t> cell_bits(std::size_t(slots), 0);
   std::vector<std::uint8_t> cell_tets(std::size_t(slots), 0);
-  const std::int64_t chunks = (std::int64_t(candidates.size()) + kChunkCubes - 1) / kChunkCubes;
   std::vector<std::int64_t> chunk_prisms(std::size_t(chunks), 0), chunk_active(std::size_t(chunks), 0);
-  tbb::parallel_for(tbb::blocked_range<std::int64_t>(0, chunks), [&](const tbb::blocked_range<std::int64_t>& r) {
-    Cell cell;
-    for (std::int64_t c = r.begin(); c != r.end(); ++c) {
-      const std::int64_t end = std::min<std::int64_t>(std::int64_t(candidates.size()), (c + 1) * kChunkCubes);
-      for (std::int64_t o = c * kChunkCubes; o < end; ++o)
-        for (int l = 0; l < K; ++l) {
-          load(o, l, cell, l == 0, cell.f + 8);
-          if (cell.positive == 0 || cell.positive == 0xFFFFu) continue;
-          ++chunk_active[std::size_t(c)];
-          const std::size_t slot = std::size_t(o * K + l);
-          cell_bits[slot] = owned_edges(cell, K);
-          int tets = 0;
-          for (int s = 0; s < 24; ++s) {
-            const int np = int(bit_count(cell.positive & kKuhn.corner_set[std::size_t(s)]));
-            if (np == 0 || np == 5) continue;
-            const bool prism = np == 2 || np == 3;
-            tets += prism ? 3 : 1;
-            chunk_prisms[std::size_t(c)] += prism;
-          }
-          cell_tets[slot] = std::uint8_t(tets);
-        }
+  for_each_active_cell([&](std::int64_t c, std::size_t slot, const Cell& cell) {
+    ++chunk_active[std::size_t(c)];
+    cell_bits[slot] = owned_edges(cell, K);
+    int tets = 0;
+    for (int s = 0; s < 24; ++s) {
+      const int np = bit_count(cell.positive & kKuhn.corner_set[std::size_t(s)]);
+      if (np == 0 || np == 5) continue;
+      const bool prism = np == 2 || np == 3;
+      tets += prism ? 3 : 1;
+      chunk_prisms[std::size_t(c)] += prism;
     }
+    cell_tets[slot] = std::uint8_t(tets);
   });
   for (std::int64_t c = 0; c < chunks; ++c) {
     result.prisms += chunk_prisms[std::size_t(c)];
@@ -266,8 +284,8 @@ ExtractResult extract_hypersurface(const MorphField& field, const ExtractOptions
   // Vertex id of the crossing on edge (a, b) of the current cell, a subset of b: the edge belongs to the
   // cell whose lower corner is corner a (the top-slab cell for spatial edges at t = 1).
   auto vertex_id = [&](const Cell& cell, int a, int b) {
-    const std::int64_t owner = cube_ordinal[std::size_t(cell.cube + (a & 1) + lat.cx * ((a >> 1) & 1) +
-                                                         lat.cx * lat.cy * ((a >> 2) & 1))];
+    const std::int64_t owner =
+        cube_ordinal[std::size_t(cell.cube + (a & 1) + lat.cx * ((a >> 1) & 1) + lat.cx * lat.cy * ((a >> 2) & 1))];
     const int level = cell.level + (a >> 3);
     const int m = a ^ b;
     const std::size_t slot = std::size_t(owner * K + std::min(level, K - 1));
@@ -279,94 +297,87 @@ ExtractResult extract_hypersurface(const MorphField& field, const ExtractOptions
   // |cross4| = 6 * volume; degenerate below 1e-12 h^3.
   const double degenerate_norm2 = std::pow(6e-12 * lat.h * lat.h * lat.h, 2);
   std::vector<std::int64_t> chunk_degenerate(std::size_t(chunks), 0);
-  tbb::parallel_for(tbb::blocked_range<std::int64_t>(0, chunks), [&](const tbb::blocked_range<std::int64_t>& r) {
-    Cell cell;
-    // Per-cell cache of crossing ids and positions, valid where stamp == the cell's serial number.
-    struct EdgeCache {
-      std::uint32_t stamp[16][16] = {};
-      int id[16][16];
-      Eigen::Vector4d point[16][16];
-    };
-    auto cache = std::make_unique<EdgeCache>();
+  // Per-thread cache of one cell's crossing ids and positions, valid where stamp == the cell's serial.
+  struct EdgeCache {
     std::uint32_t serial = 0;
-    for (std::int64_t c = r.begin(); c != r.end(); ++c) {
-      const std::int64_t end = std::min<std::int64_t>(std::int64_t(candidates.size()), (c + 1) * kChunkCubes);
-      for (std::int64_t o = c * kChunkCubes; o < end; ++o)
-        for (int l = 0; l < K; ++l) {
-          load(o, l, cell, l == 0, cell.f + 8);
-          if (cell.positive == 0 || cell.positive == 0xFFFFu) continue;
-          const std::size_t slot = std::size_t(o * K + l);
-          const unsigned bits = cell_bits[slot];
-          std::int64_t id = vertex_base[slot];
-          for (int bit = 1; bit < 23; ++bit) {
-            if (!(bits & (1u << bit))) continue;
-            const bool top = bit > 15;
-            const int a = top ? 8 : 0, m = top ? bit - 15 : bit;
-            mesh.V.row(id) = lat.crossing(cell.i, cell.j, cell.k, l + (a >> 3), m, cell.f[a], cell.f[a | m]).transpose();
-            mesh.side[std::size_t(id)] = top ? VertexSide::B : (l == 0 && m < 8 ? VertexSide::A : VertexSide::Interior);
-            ++id;
-          }
-          ++serial;
-          auto edge = [&](int a, int b) {
-            if (a > b) std::swap(a, b);
-            if (cache->stamp[a][b] != serial) {
-              cache->stamp[a][b] = serial;
-              cache->id[a][b] = vertex_id(cell, a, b);
-              cache->point[a][b] = lat.crossing(cell.i + (a & 1), cell.j + ((a >> 1) & 1), cell.k + ((a >> 2) & 1),
-                                                l + (a >> 3), a ^ b, cell.f[a], cell.f[b]);
-            }
-            return std::pair<int, const Eigen::Vector4d*>(cache->id[a][b], &cache->point[a][b]);
-          };
-          std::int64_t row = tet_offset[slot];
-          const std::int64_t source_base = (cell.base3 + lat.n3 * l) * 24;
-          for (int s = 0; s < 24; ++s) {
-            const int positives = bit_count(cell.positive & kKuhn.corner_set[std::size_t(s)]);
-            if (positives == 0 || positives == 5) continue;
-            const auto& cm = kKuhn.corner[std::size_t(s)];
-            int P[5], N[5], np = 0, nn = 0;
-            for (int q = 0; q < 5; ++q) (cell.positive & (1u << cm[std::size_t(q)]) ? P[np++] : N[nn++]) = cm[std::size_t(q)];
-            // Gradient of the simplex's linear interpolant, one axis per step of the Kuhn walk.
-            Eigen::Vector4d g;
-            for (int q = 0; q < 4; ++q) {
-              const int axis = kKuhn.axis[std::size_t(s)][std::size_t(q)];
-              g(axis) = (double(cell.f[cm[std::size_t(q) + 1]]) - double(cell.f[cm[std::size_t(q)]])) * inverse_spacing[axis];
-            }
-            std::array<std::pair<int, int>, 6> edges;
-            int tets[3][4];
-            int count;
-            if (np == 1 || nn == 1) {
-              const int lone = np == 1 ? P[0] : N[0];
-              const int* others = np == 1 ? N : P;
-              for (int q = 0; q < 4; ++q) edges[std::size_t(q)] = {lone, others[q]};
-              tets[0][0] = 0, tets[0][1] = 1, tets[0][2] = 2, tets[0][3] = 3;
-              count = 1;
-            } else {
-              const int* pair = np == 2 ? P : N;
-              const int* triple = np == 2 ? N : P;
-              std::array<int, 6> ids;
-              for (int q = 0; q < 3; ++q) {
-                edges[std::size_t(q)] = {pair[0], triple[q]};
-                edges[std::size_t(q) + 3] = {pair[1], triple[q]};
-              }
-              for (int q = 0; q < 6; ++q) ids[std::size_t(q)] = edge(edges[std::size_t(q)].first, edges[std::size_t(q)].second).first;
-              count = split_prism(ids, tets);
-            }
-            for (int t = 0; t < count; ++t) {
-              int v[4];
-              const Eigen::Vector4d* p[4];
-              for (int q = 0; q < 4; ++q) {
-                const auto& e = edges[std::size_t(tets[t][q])];
-                std::tie(v[q], p[q]) = edge(e.first, e.second);
-              }
-              const Eigen::Vector4d n = cross4(*p[1] - *p[0], *p[2] - *p[0], *p[3] - *p[0]);
-              if (n.dot(g) < 0.0) std::swap(v[2], v[3]);
-              chunk_degenerate[std::size_t(c)] += n.squaredNorm() <= degenerate_norm2;
-              mesh.T.row(row) << v[0], v[1], v[2], v[3];
-              mesh.source_cell[std::size_t(row)] = source_base + s;
-              ++row;
-            }
-          }
+    std::uint32_t stamp[16][16] = {};
+    int id[16][16];
+    Eigen::Vector4d point[16][16];
+  };
+  tbb::enumerable_thread_specific<std::unique_ptr<EdgeCache>> caches([] { return std::make_unique<EdgeCache>(); });
+  for_each_active_cell([&](std::int64_t c, std::size_t slot, const Cell& cell) {
+    EdgeCache* cache = caches.local().get();
+    const std::uint32_t serial = ++cache->serial;
+    const int l = cell.level;
+    const unsigned bits = cell_bits[slot];
+    std::int64_t id = vertex_base[slot];
+    for (int bit = 1; bit < 23; ++bit) {
+      if (!(bits & (1u << bit))) continue;
+      const bool top = bit > 15;
+      const int a = top ? 8 : 0, m = top ? bit - 15 : bit;
+      mesh.V.row(id) = lat.crossing(cell.i, cell.j, cell.k, l + (a >> 3), m, cell.f[a], cell.f[a | m]).transpose();
+      mesh.side[std::size_t(id)] = top ? VertexSide::B : (l == 0 && m < 8 ? VertexSide::A : VertexSide::Interior);
+      ++id;
+    }
+    auto edge = [&](int a, int b) {
+      if (a > b) std::swap(a, b);
+      if (cache->stamp[a][b] != serial) {
+        cache->stamp[a][b] = serial;
+        cache->id[a][b] = vertex_id(cell, a, b);
+        cache->point[a][b] = lat.crossing(cell.i + (a & 1), cell.j + ((a >> 1) & 1), cell.k + ((a >> 2) & 1),
+                                          l + (a >> 3), a ^ b, cell.f[a], cell.f[b]);
+      }
+      return std::pair<int, const Eigen::Vector4d*>(cache->id[a][b], &cache->point[a][b]);
+    };
+    std::int64_t row = tet_offset[slot];
+    const std::int64_t source_base = (cell.base3 + lat.n3 * l) * 24;
+    for (int s = 0; s < 24; ++s) {
+      const int positives = bit_count(cell.positive & kKuhn.corner_set[std::size_t(s)]);
+      if (positives == 0 || positives == 5) continue;
+      const auto& cm = kKuhn.corner[std::size_t(s)];
+      int P[5], N[5], np = 0, nn = 0;
+      for (int q = 0; q < 5; ++q) (cell.positive & (1u << cm[std::size_t(q)]) ? P[np++] : N[nn++]) = cm[std::size_t(q)];
+      // Gradient of the simplex's linear interpolant, one axis per step of the Kuhn walk.
+      Eigen::Vector4d g;
+      for (int q = 0; q < 4; ++q) {
+        const int axis = kKuhn.axis[std::size_t(s)][std::size_t(q)];
+        g(axis) = (double(cell.f[cm[std::size_t(q) + 1]]) - double(cell.f[cm[std::size_t(q)]])) * inverse_spacing[axis];
+      }
+      std::array<std::pair<int, int>, 6> edges;
+      int tets[3][4];
+      int count;
+      if (np == 1 || nn == 1) {
+        const int lone = np == 1 ? P[0] : N[0];
+        const int* others = np == 1 ? N : P;
+        for (int q = 0; q < 4; ++q) edges[std::size_t(q)] = {lone, others[q]};
+        tets[0][0] = 0, tets[0][1] = 1, tets[0][2] = 2, tets[0][3] = 3;
+        count = 1;
+      } else {
+        const int* pair = np == 2 ? P : N;
+        const int* triple = np == 2 ? N : P;
+        std::array<int, 6> ids;
+        for (int q = 0; q < 3; ++q) {
+          edges[std::size_t(q)] = {pair[0], triple[q]};
+          edges[std::size_t(q) + 3] = {pair[1], triple[q]};
         }
+        for (int q = 0; q < 6; ++q)
+          ids[std::size_t(q)] = edge(edges[std::size_t(q)].first, edges[std::size_t(q)].second).first;
+        count = split_prism(ids, tets);
+      }
+      for (int t = 0; t < count; ++t) {
+        int v[4];
+        const Eigen::Vector4d* p[4];
+        for (int q = 0; q < 4; ++q) {
+          const auto& e = edges[std::size_t(tets[t][q])];
+          std::tie(v[q], p[q]) = edge(e.first, e.second);
+        }
+        const Eigen::Vector4d n = cross4(*p[1] - *p[0], *p[2] - *p[0], *p[3] - *p[0]);
+        if (n.dot(g) < 0.0) std::swap(v[2], v[3]);
+        chunk_degenerate[std::size_t(c)] += n.squaredNorm() <= degenerate_norm2;
+        mesh.T.row(row) << v[0], v[1], v[2], v[3];
+        mesh.source_cell[std::size_t(row)] = source_base + s;
+        ++row;
+      }
     }
   });
 

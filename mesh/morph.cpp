@@ -115,6 +115,27 @@ std::int64_t fill_exact_distances(const Surface& A, const Surface& B, float clam
 
 }  // namespace
 
+MorphField sample_morph(const SignedDistance& dA, const SignedDistance& dB, double extent, int n) {
+  if (n < 2 || !(extent > 0.0)) throw InvalidInput("sample_morph: need n >= 2 points and a positive extent");
+  MorphField field;
+  field.voxel_size = 2.0 * extent / (n - 1);
+  field.dims = Eigen::Vector3i(n, n, n);
+  field.origin = Eigen::Vector3d::Constant(-extent);
+  field.dA.resize(std::size_t(n) * n * n);
+  field.dB.resize(field.dA.size());
+  tbb::parallel_for(tbb::blocked_range<int>(0, n), [&](const tbb::blocked_range<int>& range) {
+    for (int k = range.begin(); k != range.end(); ++k)
+      for (int j = 0; j < n; ++j)
+        for (int i = 0; i < n; ++i) {
+          const Eigen::Vector3d p = field.point(i, j, k);
+          const std::size_t q = std::size_t(field.index(i, j, k));
+          field.dA[q] = float(dA(p));
+          field.dB[q] = float(dB(p));
+        }
+  });
+  return field;
+}
+
 MorphResult build_morph(const Surface& A, const Surface& B, const MorphOptions& options) {
   const auto start = std::chrono::steady_clock::now();
   static std::once_flag vdb_init;

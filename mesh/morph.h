@@ -6,6 +6,7 @@
 #include <Eigen/Core>
 #include <Eigen/Geometry>
 #include <cstdint>
+#include <functional>
 #include <vector>
 
 #include "mesh/surface.h"
@@ -43,5 +44,12 @@ struct MorphResult {
 
 /// Builds dA and dB on a lattice covering both (closed, manifold) surfaces plus padding.
 MorphResult build_morph(const Surface& A, const Surface& B, const MorphOptions& options);
+
+/// Signed distance (negative inside) of an analytic shape.
+using SignedDistance = std::function<double(const Eigen::Vector3d&)>;
+
+/// Samples analytic signed distances on a cubic lattice of n^3 points spanning [-extent, extent]^3:
+/// exact fields for tests and benchmarks of the stages after the morph.
+MorphField sample_morph(const SignedDistance& dA, const SignedDistance& dB, double extent, int n);
 
 }  // namespace morphmap

@@ -10,6 +10,7 @@
 #include <map>
 
 #include "mesh/errors.h"
+#include "mesh/morph.h"
 
 namespace morphmap {
 namespace {
@@ -17,21 +18,7 @@ namespace {
 using Sdf = std::function<double(const Eigen::Vector3d&)>;
 
 MorphField analytic_field(const Sdf& a, const Sdf& b, double extent, double h) {
-  MorphField field;
-  field.voxel_size = h;
-  const int n = int(std::ceil(2.0 * extent / h)) + 1;
-  field.dims = Eigen::Vector3i(n, n, n);
-  field.origin = Eigen::Vector3d::Constant(-extent);
-  field.dA.resize(std::size_t(n) * n * n);
-  field.dB.resize(field.dA.size());
-  for (int k = 0; k < n; ++k)
-    for (int j = 0; j < n; ++j)
-      for (int i = 0; i < n; ++i) {
-        const Eigen::Vector3d p = field.point(i, j, k);
-        field.dA[std::size_t(field.index(i, j, k))] = float(a(p));
-        field.dB[std::size_t(field.index(i, j, k))] = float(b(p));
-      }
-  return field;
+  return sample_morph(a, b, extent, int(std::ceil(2.0 * extent / h)) + 1);
 }
 
 Sdf sphere(double r, Eigen::Vector3d c = Eigen::Vector3d::Zero()) {
