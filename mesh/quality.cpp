@@ -9,6 +9,7 @@
 
 #include <Eigen/Dense>
 #include <algorithm>
+#include <array>
 #include <atomic>
 #include <chrono>
 #include <cmath>
@@ -29,6 +30,10 @@ constexpr double kPi = 3.14159265358979323846;
 // Relative to the mean, so the criterion does not depend on the mesh's units.
 constexpr double kDegenerateVolumeRatio = 1e-12;
 
+// 6 * volume (cross4 or QR) carries an absolute error of a few ulps of |e1| |e2| |e3|, its Hadamard bound; below
+// this ratio it is rounding noise. Needed besides the mean test, which cannot flag a mesh whose tets are all flat.
+constexpr double kRoundoffVolumeRatio = 1e-13;
+
 // An assembled K_ij that is zero in exact arithmetic (cube edges of Kuhn tets, whose opposite dihedrals are
 // right angles) comes out as a few ulps of the entries' scale with either sign; it is not a negative weight.
 constexpr double kRoundoffZeroRatio = 1e-14;
@@ -48,7 +53,9 @@ constexpr int kOpposite[6][2] = {{2, 3}, {1, 3}, {1, 2}, {0, 3}, {0, 2}, {0, 1}}
 std::size_t to_size(Eigen::Index i) { return static_cast<std::size_t>(i); }
 
 void check_input(const TetMesh4& mesh, const QualityOptions& options) {
-  if (!(options.histogram_bins >= 1)) throw InvalidInput("measure_quality: histogram_bins must be at least 1");
+  if (!(options.histogram_bins >= 1 && options.histogram_bins <= 1000000)) {
+    throw InvalidInput("measure_quality: histogram_bins must lie in [1, 1000000]");
+  }
   if (!(options.obtuse_threshold_degrees >= 0.0 && options.obtuse_threshold_degrees <= 180.0)) {
     throw InvalidInput("measure_quality: obtuse_threshold_degrees must lie in [0, 180]");
   }
@@ -63,35 +70,71 @@ void check_input(const TetMesh4& mesh, const QualityOptions& options) {
   }
 }
 
-/// R factor of the Householder QR of E = [v1 - v0, v2 - v0, v3 - v0]: its columns are the edge vectors in an
-/// orthonormal frame of the tet's hull. Householder rather than the Gram matrix because a sliver's volume is
-/// the small R(2, 2), which Householder gets to an ulp of the edge lengths, while det(E^T E) loses it.
+/// R factor of the QR factorisation of E = [v1 - v0, v2 - v0, v3 - v0] (4 by 3): its columns are the edge vectors in
+/// an orthonormal frame of the tet's hull. A sliver's volume is the small R(2, 2), which QR gets to an ulp of the
+/// edge lengths while det(E^T E) loses it to rounding. Modified Gram-Schmidt because only R is used, and MGS's R is
+/// backward stable like Householder's (Bjorck 1967; it is Householder QR of [0; E]); only its Q drifts.
 Eigen::Matrix3d hull_coordinates(const Points4& V, const TetIndices& T, Eigen::Index t) {
-  Eigen::Matrix<double, 4, 3> A;
-  for (int c = 0; c < 3; ++c) A.col(c) = (V.row(T(t, c + 1)) - V.row(T(t, 0))).transpose();
-  for (int k = 0; k < 3; ++k) {
-    const int m = 4 - k;
-    const double norm = A.col(k).tail(m).norm();
-    if (norm == 0.0) continue;  // column already zero below the diagonal: R(k, k) = 0, nothing to reflect
-    // alpha has the opposite sign of x(0) so that v = x - alpha e_0 suffers no cancellation (and v != 0).
-    const double alpha = A(k, k) > 0.0 ? -norm : norm;
-    Eigen::Vector4d v = Eigen::Vector4d::Zero();
-    v.head(m) = A.col(k).tail(m);
-    v(0) -= alpha;
-    const double vv = v.head(m).squaredNorm();
-    for (int j = k + 1; j < 3; ++j) {
-      const double scale = 2.0 * v.head(m).dot(A.col(j).tail(m)) / vv;
-      A.col(j).tail(m) -= scale * v.head(m);
-    }
-    A(k, k) = alpha;
+  const Eigen::Vector4d v0 = V.row(T(t, 0)).transpose();
+  Eigen::Vector4d a = V.row(T(t, 1)).transpose() - v0;
+  Eigen::Vector4d b = V.row(T(t, 2)).transpose() - v0;
+  Eigen::Vector4d c = V.row(T(t, 3)).transpose() - v0;
+  Eigen::Matrix3d R = Eigen::Matrix3d::Zero();
+  // A zero pivot leaves the later columns unprojected: R(k, k) = 0 already makes the volume 0, without NaN.
+  R(0, 0) = a.norm();
+  if (R(0, 0) > 0.0) {
+    a /= R(0, 0);
+    R(0, 1) = a.dot(b);
+    b -= R(0, 1) * a;
+    R(0, 2) = a.dot(c);
+    c -= R(0, 2) * a;
   }
-  Eigen::Matrix3d R = A.topRows<3>();
-  R(1, 0) = R(2, 0) = R(2, 1) = 0.0;
+  R(1, 1) = b.norm();
+  if (R(1, 1) > 0.0) {
+    b /= R(1, 1);
+    R(1, 2) = b.dot(c);
+    c -= R(1, 2) * b;
+  }
+  R(2, 2) = c.norm();
   return R;
 }
 
 /// Signed 6 * volume of a tet from its hull coordinates.
 double hull_determinant(const Eigen::Matrix3d& R) { return R(0, 0) * R(1, 1) * R(2, 2); }
+
+/// 3-volume, or 0 where it is rounding noise (or overflowed): such a tet has nothing to measure. From the
+/// generalised cross product, whose 3x3 minors carry the same absolute error as the QR determinant (a few ulps of
+/// |e1| |e2| |e3|) at a fraction of the cost; only the tets that pass are factorised.
+double measurable_volume(const Points4& V, const TetIndices& T, Eigen::Index t) {
+  const Eigen::Vector4d v0 = V.row(T(t, 0)).transpose();
+  const Eigen::Vector4d a = V.row(T(t, 1)).transpose() - v0;
+  const Eigen::Vector4d b = V.row(T(t, 2)).transpose() - v0;
+  const Eigen::Vector4d c = V.row(T(t, 3)).transpose() - v0;
+  const double det = cross4(a, b, c).norm();
+  const double hadamard = std::sqrt(a.squaredNorm() * b.squaredNorm() * c.squaredNorm());
+  return det > kRoundoffVolumeRatio * hadamard && std::isfinite(det) ? det / 6.0 : 0.0;
+}
+
+/// Vertex ids of tet t in increasing order: the first is the smaller end of 3 of the tet's edges, the second
+/// of 2, the third of 1, so 3 bucket reservations cover all 6 edges.
+std::array<int, 4> sorted_vertices(const TetIndices& T, Eigen::Index t) {
+  std::array<int, 4> v = {T(t, 0), T(t, 1), T(t, 2), T(t, 3)};
+  std::sort(v.begin(), v.end());
+  return v;
+}
+
+/// Number of leading entries of the decreasing array edge_cos[0 .. count) that are >= c, i.e. the histogram
+/// bin of a dihedral with cosine c. Branch-free halving: the bins of neighbouring angles are unpredictable.
+int bin_of(const double* edge_cos, int count, double c) {
+  if (count == 0) return 0;
+  const double* base = edge_cos;
+  for (int len = count; len > 1;) {
+    const int half = len / 2;
+    base += base[half] >= c ? half : 0;
+    len -= half;
+  }
+  return int(base - edge_cos) + (*base >= c ? 1 : 0);
+}
 
 /// w_k = det * grad(lambda_k) for the four hats, from cross products of the hull coordinates (vertex 0 at the
 /// origin): w_1 = p2 x p3 etc., and w_0 from the opposite face's own edges rather than as -(w_1 + w_2 + w_3),
@@ -109,12 +152,37 @@ struct ChunkStats {
   double volume_sum = 0.0;
 };
 
+/// Dihedral extremes are chosen by cosine (cheap, monotone) and evaluated with atan2 only at the end.
 struct ChunkAngles {
-  double min_dihedral = std::numeric_limits<double>::infinity();
-  double max_dihedral = -std::numeric_limits<double>::infinity();
+  double smallest_cos = 2.0;     ///< cosine of the largest dihedral (cos decreases on [0, pi])
+  double largest_cos = -2.0;     ///< cosine of the smallest dihedral
+  Eigen::Index largest_tet = -1, smallest_tet = -1;
+  int largest_edge = 0, smallest_edge = 0;
   std::int64_t obtuse = 0;
   std::int64_t measured_tets = 0;
 };
+
+/// A tet edge waiting for its slot in the bucket of its smaller vertex.
+struct PendingEdge {
+  int a, b;      ///< smaller and larger vertex
+  double value;  ///< vol * grad(lambda_i) . grad(lambda_j) of this tet
+};
+
+/// A tet whose edges wait for their slots: the buckets of its three smallest vertices, reserved together.
+struct PendingTet {
+  std::array<int, 4> sorted;
+  std::array<std::int64_t, 3> base;
+};
+
+/// Dihedral at local edge e of tet t, in degrees: pi minus the angle between the gradients of the other two hats
+/// (inward face normals); atan2 keeps it accurate near 0 and 180 degrees, where acos is not.
+double dihedral_degrees(const Points4& V, const TetIndices& T, Eigen::Index t, int e) {
+  Eigen::Vector3d w[4];
+  scaled_gradients(hull_coordinates(V, T, t), w);
+  const Eigen::Vector3d& wk = w[kOpposite[e][0]];
+  const Eigen::Vector3d& wl = w[kOpposite[e][1]];
+  return std::atan2(wk.cross(wl).norm(), -wk.dot(wl)) * (180.0 / kPi);
+}
 
 struct ChunkEdges {
   std::int64_t edges = 0;
@@ -148,8 +216,7 @@ QualityResult measure_quality(const TetMesh4& mesh, const QualityOptions& option
     ChunkStats& s = volume_stats[to_size(chunk)];
     const Eigen::Index end = std::min(tets, (chunk + 1) * kChunkTets);
     for (Eigen::Index t = chunk * kChunkTets; t < end; ++t) {
-      double vol = std::abs(hull_determinant(hull_coordinates(V, T, t))) / 6.0;
-      if (!std::isfinite(vol)) vol = 0.0;  // overflow of huge coordinates: nothing usable to measure
+      const double vol = measurable_volume(V, T, t);
       volume[to_size(t)] = vol;
       s.min_volume = std::min(s.min_volume, vol);
       s.volume_sum += vol;
@@ -163,7 +230,7 @@ QualityResult measure_quality(const TetMesh4& mesh, const QualityOptions& option
   const double mean_volume = volume_sum / double(tets);
   result.min_volume_ratio = mean_volume > 0.0 ? min_volume / mean_volume : 0.0;
   const double degenerate_volume = kDegenerateVolumeRatio * mean_volume;
-  // Written as !(vol > bound) so that an all-flat mesh (bound 0) has only degenerate tets and no division by 0.
+  // Strict: in an all-flat mesh (bound 0) every tet is degenerate, so nothing below divides by a zero volume.
   auto usable = [&](Eigen::Index t) { return volume[to_size(t)] > degenerate_volume; };
 
   // Bucket every tet edge (a, b), a < b, under its smaller vertex a: a counting sort keyed by a, so that
@@ -176,9 +243,8 @@ QualityResult measure_quality(const TetMesh4& mesh, const QualityOptions& option
     const Eigen::Index end = std::min(tets, (chunk + 1) * kChunkTets);
     for (Eigen::Index t = chunk * kChunkTets; t < end; ++t) {
       if (!usable(t)) continue;
-      for (const auto& e : kEdge) {
-        fill[to_size(std::min(T(t, e[0]), T(t, e[1])))].fetch_add(1, std::memory_order_relaxed);
-      }
+      const std::array<int, 4> v = sorted_vertices(T, t);
+      for (int r = 0; r < 3; ++r) fill[std::size_t(v[std::size_t(r)])].fetch_add(3 - r, std::memory_order_relaxed);
     }
   });
   std::vector<std::int64_t> offset(to_size(n) + 1, 0);
@@ -190,82 +256,134 @@ QualityResult measure_quality(const TetMesh4& mesh, const QualityOptions& option
   std::vector<int> other(std::size_t(offset.back()));
   std::vector<double> value(std::size_t(offset.back()));
 
-  // Angles, histogram and the per-tet stiffness. The slot order inside a bucket depends on the scheduling;
-  // the per-vertex sort below removes that before anything is summed.
+  // Angles, histogram and the per-tet stiffness. Angles are classified by cosine against precomputed bin
+  // edges, which saves six atan2 per tet; near the classification boundaries (well inside (0, 180)) the cosine
+  // is as accurate as the angle.
+  std::vector<double> bin_edge_cos(std::size_t(bins - 1));  // cos of the upper edge of bins 0 .. bins-2, decreasing
+  for (int b = 1; b < bins; ++b) bin_edge_cos[std::size_t(b - 1)] = std::cos(kPi * b / bins);
+  const double obtuse_above = options.obtuse_threshold_degrees + kAngleSlackDegrees;
+  const double obtuse_cos = obtuse_above >= 180.0 ? -std::numeric_limits<double>::infinity()
+                                                  : std::cos(obtuse_above * (kPi / 180.0));
   std::vector<ChunkAngles> angle_stats(to_size(tet_chunks));
   std::vector<std::int64_t> chunk_histogram(to_size(tet_chunks) * std::size_t(bins), 0);
-  const double obtuse_above = options.obtuse_threshold_degrees + kAngleSlackDegrees;
   tbb::parallel_for(Eigen::Index(0), tet_chunks, [&](Eigen::Index chunk) {
     ChunkAngles& s = angle_stats[to_size(chunk)];
     std::int64_t* histogram = chunk_histogram.data() + to_size(chunk) * std::size_t(bins);
     const Eigen::Index end = std::min(tets, (chunk + 1) * kChunkTets);
+    // Slots are reserved for a batch of tets at a time, three per tet: an atomic increment is a full fence on
+    // x86, and one per edge interleaved with the scattered (cache-missing) stores serialised them (~30% of the
+    // stage). The slot order inside a bucket still depends on the scheduling; the per-vertex sort below
+    // removes that before anything is summed.
+    constexpr int kBatchTets = 64;
+    std::array<PendingTet, kBatchTets> batch_tets;
+    std::array<PendingEdge, 6 * kBatchTets> batch_edges;
     Eigen::Vector3d w[4];
-    for (Eigen::Index t = chunk * kChunkTets; t < end; ++t) {
-      if (!usable(t)) continue;
-      const Eigen::Matrix3d R = hull_coordinates(V, T, t);
-      scaled_gradients(R, w);
-      // vol * grad_i . grad_j = (|det| / 6) * (w_i . w_j) / det^2.
-      const double stiffness_scale = 1.0 / (6.0 * std::abs(hull_determinant(R)));
-      ++s.measured_tets;
-      for (int e = 0; e < 6; ++e) {
-        // The dihedral at edge ij is pi minus the angle between the gradients of the other two hats (the
-        // inward face normals); atan2 keeps it accurate near 0 and 180 degrees, where acos is not.
-        const Eigen::Vector3d& wk = w[kOpposite[e][0]];
-        const Eigen::Vector3d& wl = w[kOpposite[e][1]];
-        const double dihedral = std::atan2(wk.cross(wl).norm(), -wk.dot(wl)) * (180.0 / kPi);
-        s.min_dihedral = std::min(s.min_dihedral, dihedral);
-        s.max_dihedral = std::max(s.max_dihedral, dihedral);
-        s.obtuse += dihedral > obtuse_above ? 1 : 0;
-        histogram[std::min(bins - 1, int(dihedral * bins / 180.0))] += 1;
-
-        const int vi = T(t, kEdge[e][0]), vj = T(t, kEdge[e][1]);
-        const int a = std::min(vi, vj);
-        const std::int64_t slot = offset[to_size(a)] + fill[to_size(a)].fetch_add(1, std::memory_order_relaxed);
-        other[std::size_t(slot)] = std::max(vi, vj);
-        value[std::size_t(slot)] = w[kEdge[e][0]].dot(w[kEdge[e][1]]) * stiffness_scale;
+    for (Eigen::Index first = chunk * kChunkTets; first < end; first += kBatchTets) {
+      const Eigen::Index last = std::min(end, first + kBatchTets);
+      std::size_t pending = 0;
+      for (Eigen::Index t = first; t < last; ++t) {
+        if (!usable(t)) continue;
+        const Eigen::Matrix3d R = hull_coordinates(V, T, t);
+        scaled_gradients(R, w);
+        ++s.measured_tets;
+        const double inverse_norm[4] = {1.0 / w[0].norm(), 1.0 / w[1].norm(), 1.0 / w[2].norm(), 1.0 / w[3].norm()};
+        // vol * grad_i . grad_j = (|det| / 6) * (w_i . w_j) / det^2.
+        const double stiffness_scale = 1.0 / (6.0 * std::abs(hull_determinant(R)));
+        PendingEdge* edges = batch_edges.data() + 6 * pending;
+        for (int e = 0; e < 6; ++e) {
+          const int k = kOpposite[e][0], l = kOpposite[e][1];
+          const double c = -w[k].dot(w[l]) * inverse_norm[k] * inverse_norm[l];  // cosine of the dihedral at e
+          if (c < s.smallest_cos) {
+            s.smallest_cos = c;
+            s.largest_tet = t;
+            s.largest_edge = e;
+          }
+          if (c > s.largest_cos) {
+            s.largest_cos = c;
+            s.smallest_tet = t;
+            s.smallest_edge = e;
+          }
+          s.obtuse += c < obtuse_cos ? 1 : 0;
+          histogram[bin_of(bin_edge_cos.data(), bins - 1, c)] += 1;
+          const int vi = T(t, kEdge[e][0]), vj = T(t, kEdge[e][1]);
+          edges[e] = {std::min(vi, vj), std::max(vi, vj), w[kEdge[e][0]].dot(w[kEdge[e][1]]) * stiffness_scale};
+        }
+        batch_tets[pending++].sorted = sorted_vertices(T, t);
+      }
+      for (std::size_t q = 0; q < pending; ++q) {
+        PendingTet& p = batch_tets[q];
+        for (std::size_t r = 0; r < 3; ++r) {
+          const std::size_t a = std::size_t(p.sorted[r]);
+          p.base[r] = offset[a] + fill[a].fetch_add(std::int32_t(3 - r), std::memory_order_relaxed);
+        }
+      }
+      for (std::size_t q = 0; q < pending; ++q) {
+        const PendingTet& p = batch_tets[q];
+        std::array<std::int64_t, 3> next = p.base;
+        for (std::size_t e = 6 * q; e < 6 * q + 6; ++e) {
+          const PendingEdge& edge = batch_edges[e];
+          const std::size_t r = edge.a == p.sorted[0] ? 0 : edge.a == p.sorted[1] ? 1 : 2;
+          const std::size_t slot = std::size_t(next[r]++);
+          other[slot] = edge.b;
+          value[slot] = edge.value;
+        }
       }
     }
   });
 
+  // Chunk order and strict comparisons: the first extreme in tet order wins, for any thread count.
   std::int64_t measured_tets = 0;
-  result.min_dihedral_degrees = std::numeric_limits<double>::infinity();
-  result.max_dihedral_degrees = -std::numeric_limits<double>::infinity();
+  ChunkAngles extremes;
   for (Eigen::Index chunk = 0; chunk < tet_chunks; ++chunk) {
     const ChunkAngles& s = angle_stats[to_size(chunk)];
     measured_tets += s.measured_tets;
     result.obtuse_dihedrals += s.obtuse;
-    result.min_dihedral_degrees = std::min(result.min_dihedral_degrees, s.min_dihedral);
-    result.max_dihedral_degrees = std::max(result.max_dihedral_degrees, s.max_dihedral);
+    if (s.smallest_cos < extremes.smallest_cos) {
+      extremes.smallest_cos = s.smallest_cos;
+      extremes.largest_tet = s.largest_tet;
+      extremes.largest_edge = s.largest_edge;
+    }
+    if (s.largest_cos > extremes.largest_cos) {
+      extremes.largest_cos = s.largest_cos;
+      extremes.smallest_tet = s.smallest_tet;
+      extremes.smallest_edge = s.smallest_edge;
+    }
     for (int b = 0; b < bins; ++b) {
       result.dihedral_histogram[std::size_t(b)] += chunk_histogram[to_size(chunk) * std::size_t(bins) + std::size_t(b)];
     }
   }
   result.degenerate_tets = tets - measured_tets;
-  if (measured_tets == 0) {
-    result.min_dihedral_degrees = result.max_dihedral_degrees = 0.0;
-  } else {
+  if (measured_tets > 0) {
+    result.min_dihedral_degrees = dihedral_degrees(V, T, extremes.smallest_tet, extremes.smallest_edge);
+    result.max_dihedral_degrees = dihedral_degrees(V, T, extremes.largest_tet, extremes.largest_edge);
     result.obtuse_dihedral_fraction = double(result.obtuse_dihedrals) / (6.0 * double(measured_tets));
   }
 
-  // Assemble K_ij per unique edge: sort each bucket by (b, value) -- a total order, so the summation order is
-  // fixed by the values alone -- and sum runs, writing the sums compacted to the front of the bucket.
+  // Assemble K_ij per unique edge. Group each bucket by the other vertex (sorting 64-bit keys: other vertex,
+  // then position), then sum each group in increasing value order: the summation order is fixed by the values
+  // alone. The sums go compacted to the front of the bucket.
   const Eigen::Index vertex_chunks = (n + kChunkVertices - 1) / kChunkVertices;
   std::vector<ChunkEdges> edge_stats(to_size(vertex_chunks));
   tbb::parallel_for(Eigen::Index(0), vertex_chunks, [&](Eigen::Index chunk) {
     ChunkEdges& s = edge_stats[to_size(chunk)];
-    std::vector<std::pair<int, double>> bucket;  // one allocation per chunk, reused for each vertex
+    std::vector<std::uint64_t> keys;  // allocated once per chunk, reused for each vertex
+    std::vector<double> values, run;
     const Eigen::Index end = std::min(n, (chunk + 1) * kChunkVertices);
     for (Eigen::Index a = chunk * kChunkVertices; a < end; ++a) {
-      const std::size_t begin = std::size_t(offset[to_size(a)]), stop = std::size_t(offset[to_size(a) + 1]);
-      bucket.clear();
-      for (std::size_t k = begin; k < stop; ++k) bucket.emplace_back(other[k], value[k]);
-      std::sort(bucket.begin(), bucket.end());
+      const std::size_t begin = std::size_t(offset[to_size(a)]), size = std::size_t(offset[to_size(a) + 1]) - begin;
+      keys.resize(size);
+      values.assign(value.begin() + std::ptrdiff_t(begin), value.begin() + std::ptrdiff_t(begin + size));
+      for (std::size_t k = 0; k < size; ++k) keys[k] = (std::uint64_t(other[begin + k]) << 32) | k;
+      std::sort(keys.begin(), keys.end());
       std::size_t out = begin;
-      for (std::size_t k = 0; k < bucket.size();) {
+      for (std::size_t k = 0; k < size;) {
+        const std::uint64_t b = keys[k] >> 32;
+        run.clear();
+        for (; k < size && keys[k] >> 32 == b; ++k) run.push_back(values[keys[k] & 0xffffffffu]);
+        std::sort(run.begin(), run.end());
         double sum = 0.0;
-        const int b = bucket[k].first;
-        for (; k < bucket.size() && bucket[k].first == b; ++k) sum += bucket[k].second;
-        other[out] = b;
+        for (double v : run) sum += v;
+        other[out] = int(b);
         value[out] = sum;
         ++out;
         s.abs_sum += std::abs(sum);

@@ -12,38 +12,42 @@
 namespace morphmap {
 
 struct QualityOptions {
-  double obtuse_threshold_degrees = 90.0;  ///< dihedrals above this count as obtuse; 90 is where the cotangent weight turns
-                                           ///< negative. Angles within 1e-9 degrees of it are not counted, so the exact
-                                           ///< right angles of lattice (Kuhn) tets stay acute despite rounding
-  int histogram_bins = 18;                 ///< dihedral histogram over [0, 180] degrees (18: 10 degree bins), >= 1
+  double obtuse_threshold_degrees = 90.0;  ///< dihedrals above this count as obtuse (90: where the cotangent weight
+                                           ///< turns negative). Angles within 1e-9 degrees of it are not counted, so
+                                           ///< the exact right angles of lattice (Kuhn) tets do not flip with rounding
+  int histogram_bins = 18;                 ///< dihedral histogram over [0, 180] degrees (18: 10 degree bins), 1 .. 1e6
 };
 
 struct QualityResult {
   std::int64_t tets = 0;
-  std::int64_t degenerate_tets = 0;        ///< 3-volume <= 1e-12 * mean volume (or non-finite): left out of every
-                                           ///< statistic below except min_volume_ratio
+  std::int64_t degenerate_tets = 0;        ///< 3-volume <= 1e-12 * mean volume, or at rounding level for the tet's
+                                           ///< own edges (6 vol <= 1e-13 |e1| |e2| |e3|, then taken as 0): left out
+                                           ///< of every statistic below except min_volume_ratio
   double min_dihedral_degrees = 0.0;       ///< over non-degenerate tets (0 if there are none)
   double max_dihedral_degrees = 0.0;       ///< over non-degenerate tets (0 if there are none)
   std::int64_t obtuse_dihedrals = 0;       ///< dihedral angles above the threshold
   double obtuse_dihedral_fraction = 0.0;   ///< obtuse_dihedrals / (6 * non-degenerate tets)
   std::int64_t edges = 0;                  ///< unique vertex pairs of non-degenerate tets
   std::int64_t negative_cotangent_edges = 0;   ///< edges whose assembled off-diagonal K_ij > 1e-14 * mean |K_ij|
-  double negative_cotangent_fraction = 0.0;    ///< negative_cotangent_edges / edges. K_ij = sum over the tets of edge
-                                               ///< ij of vol * grad(lambda_i) . grad(lambda_j) = -(1/6) sum l cot(theta),
+  double negative_cotangent_fraction = 0.0;    ///< negative_cotangent_edges / edges. K_ij = sum over the tets of
+                                               ///< edge ij of vol grad(lambda_i) . grad(lambda_j) = -(1/6) sum l cot,
                                                ///< so K_ij > 0 is a negative cotangent weight
   double min_volume_ratio = 0.0;           ///< smallest tet 3-volume / mean 3-volume, degenerate tets included
-  std::vector<std::int64_t> dihedral_histogram;  ///< histogram_bins counts of the non-degenerate dihedrals; bin b holds
-                                                 ///< [b, b + 1) * 180 / bins degrees, 180 itself in the last bin
+  std::vector<std::int64_t> dihedral_histogram;  ///< histogram_bins counts of the non-degenerate dihedrals; bin b
+                                                 ///< holds [b, b + 1) * 180 / bins degrees, 180 in the last bin
   double seconds = 0.0;
 };
 
 /// Dihedral angles, degenerate tets and the sign of the assembled cotangent stiffness of every edge.
-/// Each tet is measured in its own 3D hull: the R factor of a Householder QR of E = [v1 - v0, v2 - v0, v3 - v0]
-/// (4 by 3) gives 3D coordinates, in which face normals and the volume are cross products and a triple product,
-/// accurate for slivers (the Gram matrix E^T E squares their condition number).
+/// Each tet is measured in its own 3D hull: the R factor of a QR factorisation of E = [v1 - v0, v2 - v0, v3 - v0]
+/// (4 by 3) gives 3D coordinates in which the face normals (scaled hat gradients) are cross products, accurate for
+/// slivers (the Gram matrix E^T E squares their condition number). Angles are classified by cosine; the reported
+/// extremes are evaluated with atan2.
 /// TBB-parallel over fixed chunks with reductions in chunk order: the result is the same for any thread count.
-/// Temporary memory: 8 bytes per tet plus 12 bytes per tet edge (~80 bytes per tet) plus 16 bytes per vertex.
-/// Throws InvalidInput for out-of-range indices or invalid options.
+/// Temporary memory: 8 bytes per tet plus 12 bytes per tet edge (~80 bytes per tet) plus 12 bytes per vertex.
+/// The Laplace stage skips tets by a shape test instead (tet_frame); tests/mesh/quality_test.cpp checks on an
+/// extracted mesh that both skip the same tets and that the edge signs agree with cotangent_stiffness.
+/// Throws InvalidInput for out-of-range indices, non-finite coordinates or invalid options.
 QualityResult measure_quality(const TetMesh4& mesh, const QualityOptions& options = {});
 
 }  // namespace morphmap

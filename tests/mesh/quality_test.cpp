@@ -43,7 +43,8 @@ TetMesh4 embedded_mesh(const std::vector<Eigen::Vector3d>& points, const std::ve
   TetMesh4 mesh;
   mesh.V.resize(Eigen::Index(points.size()), 4);
   for (std::size_t i = 0; i < points.size(); ++i) {
-    mesh.V.row(Eigen::Index(i)) = (Q * Eigen::Vector4d(points[i].x(), points[i].y(), points[i].z(), 0.0) + shift).transpose();
+    const Eigen::Vector4d p(points[i].x(), points[i].y(), points[i].z(), 0.0);
+    mesh.V.row(Eigen::Index(i)) = (Q * p + shift).transpose();
   }
   mesh.T.resize(Eigen::Index(tets.size()), 4);
   for (std::size_t t = 0; t < tets.size(); ++t) {
@@ -113,7 +114,9 @@ TEST(QualityObtuseTet, ApexOverTheBaseGivesObtuseDihedralsAndPositiveOffDiagonal
                                             Eigen::Vector3d(0, 1, -30), Eigen::Vector3d(0, 0, 100)};
   std::vector<double> dihedral;
   for (int k = 0; k < 4; ++k) {
-    for (int l = k + 1; l < 4; ++l) dihedral.push_back(180.0 - degrees(std::acos(g[k].normalized().dot(g[l].normalized()))));
+    for (int l = k + 1; l < 4; ++l) {
+      dihedral.push_back(180.0 - degrees(std::acos(g[k].normalized().dot(g[l].normalized()))));
+    }
   }
   EXPECT_NEAR(r.min_dihedral_degrees, *std::min_element(dihedral.begin(), dihedral.end()), 1e-8);
   EXPECT_NEAR(r.max_dihedral_degrees, *std::max_element(dihedral.begin(), dihedral.end()), 1e-8);
@@ -230,7 +233,9 @@ TEST(QualityInput, RejectsBadIndicesAndOptions) {
 TetMesh4 extracted_mesh() {
   using Sdf = std::function<double(const Eigen::Vector3d&)>;
   const Sdf a = [](const Eigen::Vector3d& p) { return p.norm() - 0.8; };
-  const Sdf b = [](const Eigen::Vector3d& p) { return Eigen::Vector2d(p.head<2>().norm() - 0.55, p.z()).norm() - 0.22; };
+  const Sdf b = [](const Eigen::Vector3d& p) {
+    return Eigen::Vector2d(p.head<2>().norm() - 0.55, p.z()).norm() - 0.22;
+  };
   MorphField field;
   field.voxel_size = 0.1;
   const int n = 23;
