@@ -71,6 +71,12 @@ int main(int argc, char** argv) {
   demo->add_option("-o,--output", demo_dir, "Output directory")->capture_default_str();
   add_pipeline_options(*demo, options);
 
+  CLI::App* stretch = app.add_subcommand("stretch", "Print the texture stretch (JSON) of a map written by `map`");
+  std::string stretch_target, stretch_labels, stretch_source;
+  stretch->add_option("TARGET", stretch_target, "The mapped surface (target.obj)")->required();
+  stretch->add_option("--labels", stretch_labels, "labels.txt: one preimage per vertex of TARGET")->required();
+  stretch->add_option("--source", stretch_source, "The source surface (file or built-in shape)")->required();
+
   try {
     app.parse(argc, argv);
   } catch (const CLI::CallForHelp& e) {
@@ -93,6 +99,11 @@ int main(int argc, char** argv) {
   }
 
   try {
+    if (stretch->parsed()) {
+      std::cout << morphmap::stretch_json(morphmap::stretch_of_files(stretch_target, stretch_labels, stretch_source))
+                << '\n';
+      return 0;
+    }
     const morphmap::PipelineResult result = morphmap::run_pipeline(options);
     if (options.progress)
       std::fprintf(stderr, "[morphmap] wrote %s (%lld target vertices, %lld tets, %lld fallbacks)\n",

@@ -125,6 +125,43 @@ long long parse_memory_size(const std::string& text) {
   return (long long)(value * scale);
 }
 
+std::string stretch_json(const StretchResult& r) {
+  const nlohmann::json j = {{"triangles", r.triangles},       {"measured", r.measured},
+                            {"min_compression", r.min_sigma2}, {"max_stretch", r.max_sigma1},
+                            {"mean_l2", r.mean_l2},           {"variance_l2", r.variance_l2},
+                            {"sander_l2", r.sander_l2},       {"folded", r.folded},
+                            {"collapsed", r.collapsed},       {"coverage", r.coverage},
+                            {"area_source", r.area_a},        {"area_target", r.area_b}};
+  return j.dump(2);
+}
+
+StretchResult stretch_of_files(const std::string& target, const std::string& labels, const std::string& source) {
+  const Surface B = read_surface(target);
+  validate_surface(B, false);
+  Surface A = is_builtin_shape(source) ? make_shape(parse_shape_spec(source), std::optional(bounding_box(B.V)))
+                                       : read_surface(source);
+  validate_surface(A, true);
+  std::ifstream in(labels);
+  if (!in) throw IoError(labels + ": cannot open file");
+  Eigen::MatrixXd pre(B.V.rows(), 3);
+  std::string line;
+  Eigen::Index row = 0;
+  while (std::getline(in, line)) {
+    if (line.empty()) continue;
+    std::istringstream fields(line);
+    double x, y, z;
+    if (!(fields >> x >> y >> z) || !std::isfinite(x) || !std::isfinite(y) || !std::isfinite(z))
+      throw InvalidInput(labels + ": line " + std::to_string(row + 1) + " is not three finite numbers");
+    if (row >= pre.rows())
+      throw InvalidInput(labels + ": more lines than the " + std::to_string(pre.rows()) + " vertices of " + target);
+    pre.row(row++) << x, y, z;
+  }
+  if (row != pre.rows())
+    throw InvalidInput(labels + ": " + std::to_string(row) + " lines for the " + std::to_string(pre.rows()) +
+                       " vertices of " + target);
+  return measure_stretch(A, B.V, B.F, pre);
+}
+
 PipelineResult run_pipeline(const PipelineOptions& options) {
   const auto start_total = Clock::now();
   std::optional<tbb::global_control> threads;
@@ -194,6 +231,8 @@ PipelineResult run_pipeline(const PipelineOptions& options) {
   result.target = target_boundary(mesh, transport.labels);
   const std::vector<SurfaceHit> hits = locator.closest_all(result.target.labels);
   seconds["map"] = seconds_since(start) + locator_seconds;
+  const StretchResult stretch = measure_stretch(A, result.target.V, result.target.F, points_of(hits));
+  seconds["metrics"] = stretch.seconds;
   progress.stage("map", seconds["map"]);
 
   start = Clock::now();
@@ -264,6 +303,7 @@ PipelineResult run_pipeline(const PipelineOptions& options) {
       {"negative_cotangent_fraction", quality.negative_cotangent_fraction},
       {"min_volume_ratio", quality.min_volume_ratio},
       {"dihedral_histogram_10deg", quality.dihedral_histogram}};
+  report["stretch"] = nlohmann::json::parse(stretch_json(stretch));
   report["solver"] = {{"name", laplace.report.backend},
                       {"iterations", laplace.report.iterations},
                       {"residual", laplace.report.residual},

@@ -6,6 +6,7 @@
 #include <vector>
 
 #include "mesh/extract.h"
+#include "mesh/metrics.h"
 #include "mesh/morph.h"
 #include "mesh/slice.h"
 #include "solver/laplace.h"
@@ -45,6 +46,13 @@ long long estimate_peak_memory(std::int64_t lattice_points, std::int64_t tets, s
 
 /// Parses "123", "512M", "8G", "1.5T" (binary units) into bytes; throws InvalidInput naming the text.
 long long parse_memory_size(const std::string& text);
+
+/// Stretch figures as report.json and `morphmap stretch` print them.
+std::string stretch_json(const StretchResult& stretch);
+
+/// `morphmap stretch`: reads TARGET (a mesh file), one preimage per vertex from LABELS, and SOURCE (a file
+/// or a built-in shape, fitted to the target's box like `map` does) and returns the stretch figures.
+StretchResult stretch_of_files(const std::string& target, const std::string& labels, const std::string& source);
 
 /// Runs every stage and writes the outputs (target.obj, labels.txt, slices, report.json) atomically
 /// into options.output_dir. Throws InvalidInput / IoError / TopologyError / SolverError.

@@ -1,0 +1,99 @@
+// Sander et al. 2001 texture stretch for the map B -> A (paper §6.3, Table I).
+#include "mesh/metrics.h"
+
+#include <tbb/blocked_range.h>
+#include <tbb/parallel_for.h>
+
+#include <Eigen/Dense>
+#include <chrono>
+#include <cmath>
+#include <limits>
+#include <vector>
+
+#include "mesh/errors.h"
+#include "mesh/transfer.h"
+
+namespace morphmap {
+
+StretchResult measure_stretch(const Surface& A, const Eigen::MatrixXd& V, const TriIndices& F,
+                              const Eigen::MatrixXd& preimages, const StretchOptions& options) {
+  const auto start = std::chrono::steady_clock::now();
+  if (V.cols() != 3 || preimages.cols() != 3 || preimages.rows() != V.rows())
+    throw InvalidInput("measure_stretch: need #V by 3 positions and one preimage per vertex (" +
+                       std::to_string(preimages.rows()) + " preimages for " + std::to_string(V.rows()) + " vertices)");
+  if (F.rows() > 0 && (F.minCoeff() < 0 || F.maxCoeff() >= V.rows()))
+    throw InvalidInput("measure_stretch: face index out of range");
+  StretchResult r;
+  r.triangles = F.rows();
+  r.area_a = surface_area(A.V, A.F);
+  const Eigen::MatrixXi Fi = F.cast<int>();
+  r.area_b = surface_area(V, Fi);
+  if (!(r.area_a > 0.0) || !(r.area_b > 0.0)) throw InvalidInput("measure_stretch: a surface has zero area");
+  const double normalise = std::sqrt(r.area_b / r.area_a);
+
+  const Eigen::Index n = F.rows();
+  Eigen::VectorXd area_b(n), area_p(n), sigma1(n), sigma2(n);
+  Eigen::MatrixXd centroid(n, 3);
+  std::vector<Eigen::Vector3d> normal_p(static_cast<std::size_t>(n));
+  tbb::parallel_for(tbb::blocked_range<Eigen::Index>(0, n), [&](const tbb::blocked_range<Eigen::Index>& range) {
+    for (Eigen::Index f = range.begin(); f != range.end(); ++f) {
+      const Eigen::Vector3d q0 = V.row(F(f, 0)), q1 = V.row(F(f, 1)), q2 = V.row(F(f, 2));
+      const Eigen::Vector3d p0 = preimages.row(F(f, 0)), p1 = preimages.row(F(f, 1)), p2 = preimages.row(F(f, 2));
+      Eigen::Matrix<double, 3, 2> Ep, Eq;
+      Ep << p1 - p0, p2 - p0;
+      Eq << q1 - q0, q2 - q0;
+      normal_p[std::size_t(f)] = Ep.col(0).cross(Ep.col(1));
+      area_p(f) = 0.5 * normal_p[std::size_t(f)].norm();
+      area_b(f) = 0.5 * Eq.col(0).cross(Eq.col(1)).norm();
+      centroid.row(f) = ((p0 + p1 + p2) / 3.0).transpose();
+      // Singular values of the map p -> q: square roots of the eigenvalues of (Ep^T Ep)^-1 Eq^T Eq,
+      // i.e. of the generalised symmetric problem Eq^T Eq x = lambda Ep^T Ep x.
+      const Eigen::Matrix2d P = Ep.transpose() * Ep, Q = Eq.transpose() * Eq;
+      const double detP = P.determinant();
+      if (!(detP > 0.0)) {
+        sigma1(f) = sigma2(f) = std::numeric_limits<double>::quiet_NaN();
+        continue;
+      }
+      const Eigen::GeneralizedSelfAdjointEigenSolver<Eigen::Matrix2d> eig(Q, P, Eigen::EigenvaluesOnly);
+      const Eigen::Vector2d lambda = eig.eigenvalues().cwiseMax(0.0);
+      sigma1(f) = std::sqrt(lambda(1)) / normalise;
+      sigma2(f) = std::sqrt(lambda(0)) / normalise;
+    }
+  });
+
+  // Folds: the preimage triangle's normal against A's outward normal at its centroid.
+  const SurfaceLocator locator(A);
+  const std::vector<SurfaceHit> hits = locator.closest_all(centroid);
+  const double mean_preimage_area = area_p.sum() / std::max<Eigen::Index>(1, n);
+  double weight = 0.0, sum = 0.0, sum2 = 0.0;
+  r.min_sigma2 = std::numeric_limits<double>::infinity();
+  r.max_sigma1 = 0.0;
+  for (Eigen::Index f = 0; f < n; ++f) {
+    r.coverage += area_p(f);
+    if (!(area_p(f) > options.collapse_ratio * mean_preimage_area) || !std::isfinite(sigma1(f))) {
+      ++r.collapsed;
+      continue;
+    }
+    const int face = hits[std::size_t(f)].face;
+    const Eigen::Vector3d a0 = A.V.row(A.F(face, 0)), a1 = A.V.row(A.F(face, 1)), a2 = A.V.row(A.F(face, 2));
+    if (normal_p[std::size_t(f)].dot((a1 - a0).cross(a2 - a0)) < 0.0) ++r.folded;
+    ++r.measured;
+    r.min_sigma2 = std::min(r.min_sigma2, sigma2(f));
+    r.max_sigma1 = std::max(r.max_sigma1, sigma1(f));
+    const double l2 = std::sqrt(0.5 * (sigma1(f) * sigma1(f) + sigma2(f) * sigma2(f)));
+    weight += area_b(f);
+    sum += area_b(f) * l2;
+    sum2 += area_b(f) * l2 * l2;
+  }
+  r.coverage /= r.area_a;
+  if (weight > 0.0) {
+    r.mean_l2 = sum / weight;
+    r.variance_l2 = std::max(0.0, sum2 / weight - r.mean_l2 * r.mean_l2);
+    r.sander_l2 = std::sqrt(sum2 / weight);
+  }
+  if (r.measured == 0) r.min_sigma2 = 0.0;
+  r.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+  return r;
+}
+
+}  // namespace morphmap

@@ -1,0 +1,39 @@
+// Texture stretch of a map B -> A (Sander et al. 2001, as used in the paper's §6.3 and Table I), with
+// the definitions of DESIGN.md: singular values of the affine map from each preimage triangle on A to
+// its triangle on B, normalised by sqrt(area(B) / area(A)) so that 1 means no distortion.
+#pragma once
+
+#include <Eigen/Core>
+#include <cstdint>
+
+#include "mesh/surface.h"
+#include "mesh/tet_mesh4.h"
+
+namespace morphmap {
+
+struct StretchOptions {
+  double collapse_ratio = 1e-12;  ///< a preimage triangle with area below this times the mean preimage area is collapsed
+};
+
+struct StretchResult {
+  std::int64_t triangles = 0;       ///< triangles of B
+  std::int64_t measured = 0;        ///< triangles entering the statistics (not collapsed)
+  double min_sigma2 = 0.0;          ///< smallest singular value ("compression"), normalised
+  double max_sigma1 = 0.0;          ///< largest singular value ("stretch"), normalised
+  double mean_l2 = 0.0;             ///< area-weighted (B areas) mean of L2 = sqrt((s1^2 + s2^2) / 2)
+  double variance_l2 = 0.0;         ///< area-weighted variance of L2
+  double sander_l2 = 0.0;           ///< Sander's L2 norm: sqrt(sum a L2^2 / sum a)
+  std::int64_t folded = 0;          ///< preimage triangles facing against A's outward normal
+  std::int64_t collapsed = 0;       ///< preimage triangles of (near) zero area
+  double coverage = 0.0;            ///< sum of preimage areas / area(A)
+  double area_a = 0.0, area_b = 0.0;
+  double seconds = 0.0;
+};
+
+/// Stretch of the map that sends each vertex of B (V #V by 3, F #F by 3) to its preimage on A
+/// (preimages #V by 3, points of A's surface, in A's coordinates). A's outward face normals at the
+/// preimage centroids decide folds.
+StretchResult measure_stretch(const Surface& A, const Eigen::MatrixXd& V, const TriIndices& F,
+                              const Eigen::MatrixXd& preimages, const StretchOptions& options = {});
+
+}  // namespace morphmap

@@ -1,0 +1,79 @@
+// Stretch metrics on maps whose singular values are known in closed form.
+#include "mesh/metrics.h"
+
+#include <gtest/gtest.h>
+
+#include "mesh/errors.h"
+#include "mesh/shapes.h"
+
+namespace morphmap {
+namespace {
+
+TriIndices faces_of(const Surface& s) { return s.F; }
+
+Surface unit_sphere() {
+  ShapeSpec spec = parse_shape_spec("sphere:size=1,center=0/0/0,res=32");
+  return make_shape(spec, std::nullopt);
+}
+
+TEST(Stretch, IdentityMapHasNoDistortion) {
+  const Surface A = unit_sphere();
+  const StretchResult r = measure_stretch(A, A.V, faces_of(A), A.V);
+  EXPECT_EQ(r.measured, A.F.rows());
+  EXPECT_NEAR(r.min_sigma2, 1.0, 1e-9);
+  EXPECT_NEAR(r.max_sigma1, 1.0, 1e-9);
+  EXPECT_NEAR(r.mean_l2, 1.0, 1e-9);
+  EXPECT_NEAR(r.variance_l2, 0.0, 1e-9);
+  EXPECT_NEAR(r.coverage, 1.0, 1e-12);
+  EXPECT_EQ(r.folded, 0);
+  EXPECT_EQ(r.collapsed, 0);
+}
+
+TEST(Stretch, UniformScaleIsNormalisedAway) {
+  const Surface A = unit_sphere();
+  const Eigen::MatrixXd B = 3.0 * A.V;
+  const StretchResult r = measure_stretch(A, B, faces_of(A), A.V);
+  EXPECT_NEAR(r.min_sigma2, 1.0, 1e-9);
+  EXPECT_NEAR(r.max_sigma1, 1.0, 1e-9);
+  EXPECT_NEAR(r.sander_l2, 1.0, 1e-9);
+}
+
+TEST(Stretch, AnisotropicScaleGivesKnownSingularValues) {
+  // B = diag(2, 1, 1) A on a sphere is not uniform per triangle, so use a flat square instead:
+  // preimages on the square, B the square stretched by 2 along x. Area ratio 2, so sigma = (2, 1) / sqrt(2).
+  Surface A;
+  A.V.resize(4, 3);
+  A.V << 0, 0, 0, 1, 0, 0, 1, 1, 0, 0, 1, 0;
+  A.F.resize(2, 3);
+  A.F << 0, 1, 2, 0, 2, 3;
+  Eigen::MatrixXd B = A.V;
+  B.col(0) *= 2.0;
+  const StretchResult r = measure_stretch(A, B, faces_of(A), A.V);
+  EXPECT_NEAR(r.max_sigma1, 2.0 / std::sqrt(2.0), 1e-12);
+  EXPECT_NEAR(r.min_sigma2, 1.0 / std::sqrt(2.0), 1e-12);
+  EXPECT_NEAR(r.mean_l2, std::sqrt((2.0 + 0.5) / 2.0), 1e-12);
+  EXPECT_NEAR(r.variance_l2, 0.0, 1e-12);
+}
+
+TEST(Stretch, FoldedAndCollapsedPreimagesAreCounted) {
+  const Surface A = unit_sphere();
+  Eigen::MatrixXd pre = A.V;
+  TriIndices F = faces_of(A);
+  // Collapse one triangle's preimage to a point; reverse another so its preimage faces inward.
+  pre.row(F(0, 1)) = pre.row(F(0, 0));
+  pre.row(F(0, 2)) = pre.row(F(0, 0));
+  TriIndices G = F;
+  std::swap(G(F.rows() / 2, 1), G(F.rows() / 2, 2));
+  const StretchResult r = measure_stretch(A, A.V, G, pre);
+  EXPECT_GE(r.collapsed, 1);
+  EXPECT_GE(r.folded, 1);
+  EXPECT_EQ(r.measured + r.collapsed, r.triangles);
+}
+
+TEST(Stretch, RejectsMismatchedInput) {
+  const Surface A = unit_sphere();
+  EXPECT_THROW(measure_stretch(A, A.V, faces_of(A), A.V.topRows(3)), InvalidInput);
+}
+
+}  // namespace
+}  // namespace morphmap
