@@ -104,6 +104,23 @@ TEST_F(Cli, MemoryGuardRefusesBeforeAllocating) {
   expect_rejected("sphere torus --max-memory 5Q", "5Q");
 }
 
+TEST_F(Cli, StretchReadsAMapAndRejectsBadLabels) {
+  const fs::path out = dir_ / "map";
+  ASSERT_EQ(run_command("map sphere torus -o " + out.string() + " --voxels 16 --time-steps 4").status, 0);
+  const CommandRun ok = run_command("stretch " + (out / "target.obj").string() + " --labels " +
+                                    (out / "labels.txt").string() + " --source sphere");
+  ASSERT_EQ(ok.status, 0) << ok.output;
+  const nlohmann::json j = nlohmann::json::parse(ok.output);
+  EXPECT_GT(j["triangles"].get<std::int64_t>(), 0);
+  EXPECT_GT(j["mean_l2"].get<double>(), 0.0);
+  // A labels file with one line too few names the file and the count.
+  const std::string short_labels = write("short.txt", "0 0 0\n1 1 1\n");
+  const CommandRun bad = run_command("stretch " + (out / "target.obj").string() + " --labels " + short_labels +
+                                     " --source sphere");
+  EXPECT_EQ(bad.status, 2) << bad.output;
+  EXPECT_NE(bad.output.find("short.txt"), std::string::npos) << bad.output;
+}
+
 TEST_F(Cli, HelpOnEveryCommand) {
   for (const char* cmd : {"--help", "map --help", "demo --help"}) {
     const CommandRun r = run_command(cmd);
