@@ -160,8 +160,7 @@ SparseMatrixD cotangent_stiffness(const Points4& V, const TetIndices& T) {
   return assemble_stiffness(T, G, vol, V.rows());
 }
 
-LaplaceResult solve_harmonic(const TetMesh4& mesh, const LaplaceOptions& options) {
-  const auto start = Clock::now();
+DirichletSystem dirichlet_system(const TetMesh4& mesh) {
   const Points4& V = mesh.V;
   const TetIndices& T = mesh.T;
   const Eigen::Index n = V.rows();
@@ -174,17 +173,15 @@ LaplaceResult solve_harmonic(const TetMesh4& mesh, const LaplaceOptions& options
   if (!(mesh.time_scale > 0.0) || !std::isfinite(mesh.time_scale)) {
     throw InvalidInput("solve_harmonic: time_scale must be positive and finite");
   }
-  // Before the expensive part, so a typo in the backend name fails fast.
-  std::unique_ptr<LinearSolver> solver = make_solver(options.solver, options.solve);
 
-  LaplaceResult result;
+  DirichletSystem system;
   const auto assemble_start = Clock::now();
   Eigen::MatrixXd G;
   Eigen::VectorXd vol;
   barycentric_gradients(V, T, G, vol);
   const SparseMatrixD K = assemble_stiffness(T, G, vol, n);
-  result.assemble_seconds = seconds_since(assemble_start);
-  result.degenerate_tets = (vol.array() <= 0.0).count();
+  system.assemble_seconds = seconds_since(assemble_start);
+  system.degenerate_tets = (vol.array() <= 0.0).count();
 
   // Components through tets that carry stiffness only: a vertex held by degenerate tets alone would have
   // an empty row in K, so it must count as its own (floating) component.
@@ -206,55 +203,71 @@ LaplaceResult solve_harmonic(const TetMesh4& mesh, const LaplaceOptions& options
   }
 
   // Unknowns: interior vertices of anchored components, numbered in vertex order.
-  result.s.setZero(n);
-  std::vector<int> unknown(static_cast<std::size_t>(n), -1);
+  system.s.setZero(n);
+  system.unknown.assign(static_cast<std::size_t>(n), -1);
   int unknowns = 0;
   for (Eigen::Index i = 0; i < n; ++i) {
     const auto r = static_cast<std::size_t>(root[static_cast<std::size_t>(i)]);
     const VertexSide side = mesh.side[static_cast<std::size_t>(i)];
     if (side == VertexSide::A) {
-      result.s(i) = 0.0;
+      system.s(i) = 0.0;
     } else if (side == VertexSide::B) {
-      result.s(i) = 1.0;
+      system.s(i) = 1.0;
     } else if (!anchored[r]) {
       // A component born and dying inside the morph has no boundary data: its harmonic s is any constant.
       // Its mean morph time keeps it ordered with the rest of the morph for the causal sweep.
-      result.s(i) = time_sum[r] / static_cast<double>(size[r]);
-      ++result.floating_vertices;
-      if (static_cast<std::size_t>(i) == r) ++result.floating_components;
+      system.s(i) = time_sum[r] / static_cast<double>(size[r]);
+      ++system.floating_vertices;
+      if (static_cast<std::size_t>(i) == r) ++system.floating_components;
     } else {
-      unknown[static_cast<std::size_t>(i)] = unknowns++;
+      system.unknown[static_cast<std::size_t>(i)] = unknowns++;
     }
   }
-  result.unknowns = unknowns;
 
   // K_II in CSC, built column by column (the numbering is monotone so rows stay sorted), and the
   // right-hand side -K_IB s_B read from the same columns because K is symmetric.
-  SparseMatrixD K_II(unknowns, unknowns);
-  Eigen::VectorXd rhs = Eigen::VectorXd::Zero(unknowns);
-  Eigen::VectorXd x(unknowns);
-  K_II.reserve(K.nonZeros());
+  system.A.resize(unknowns, unknowns);
+  system.b = Eigen::VectorXd::Zero(unknowns);
+  system.x0.resize(unknowns);
+  system.A.reserve(K.nonZeros());
   for (Eigen::Index j = 0; j < n; ++j) {
-    const int uj = unknown[static_cast<std::size_t>(j)];
+    const int uj = system.unknown[static_cast<std::size_t>(j)];
     if (uj < 0) continue;
-    K_II.startVec(uj);
+    system.A.startVec(uj);
     for (SparseMatrixD::InnerIterator it(K, j); it; ++it) {
-      const int ui = unknown[static_cast<std::size_t>(it.row())];
+      const int ui = system.unknown[static_cast<std::size_t>(it.row())];
       if (ui >= 0) {
-        K_II.insertBack(ui, uj) = it.value();
+        system.A.insertBack(ui, uj) = it.value();
       } else {
-        rhs(uj) -= it.value() * result.s(it.row());
+        system.b(uj) -= it.value() * system.s(it.row());
       }
     }
-    x(uj) = options.warm_start ? mesh.time_of(j) : 0.0;
+    system.x0(uj) = mesh.time_of(j);
   }
-  K_II.finalize();
+  system.A.finalize();
+  return system;
+}
 
-  if (unknowns > 0) {
-    solver->compute(K_II);
-    result.report = solver->solve(rhs, x);
-    for (Eigen::Index i = 0; i < n; ++i) {
-      const int u = unknown[static_cast<std::size_t>(i)];
+LaplaceResult solve_harmonic(const TetMesh4& mesh, const LaplaceOptions& options) {
+  const auto start = Clock::now();
+  // Before the expensive part, so a typo in the backend name fails fast.
+  std::unique_ptr<LinearSolver> solver = make_solver(options.solver, options.solve);
+  DirichletSystem system = dirichlet_system(mesh);
+
+  LaplaceResult result;
+  result.assemble_seconds = system.assemble_seconds;
+  result.degenerate_tets = system.degenerate_tets;
+  result.floating_components = system.floating_components;
+  result.floating_vertices = system.floating_vertices;
+  result.unknowns = system.A.rows();
+  result.s = std::move(system.s);
+  // Direct backends ignore x; the iterative ones (gauss-seidel included) start from it.
+  Eigen::VectorXd x = options.warm_start ? system.x0 : Eigen::VectorXd::Zero(system.A.rows());
+  if (result.unknowns > 0) {
+    solver->compute(system.A);
+    result.report = solver->solve(system.b, x);
+    for (Eigen::Index i = 0; i < result.s.size(); ++i) {
+      const int u = system.unknown[static_cast<std::size_t>(i)];
       if (u >= 0) result.s(i) = x(u);
     }
   } else {

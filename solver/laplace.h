@@ -5,6 +5,7 @@
 #include <Eigen/Core>
 #include <cstdint>
 #include <string>
+#include <vector>
 
 #include "mesh/tet_mesh4.h"
 #include "solver/linear_solver.h"
@@ -31,10 +32,30 @@ void barycentric_gradients(const Points4& V, const TetIndices& T, Eigen::MatrixX
 SparseMatrixD cotangent_stiffness(const Points4& V, const TetIndices& T);
 
 struct LaplaceOptions {
-  std::string solver = "cg";       ///< backend name for make_solver (cg: 6x faster than cholmod on the demo, 3.6 s vs 23 s)
-  SolveOptions solve;              ///< tolerance and iteration limit of iterative backends
-  bool warm_start = true;          ///< iterative backends start from s = t instead of 0
+  std::string solver = "cg";       ///< backend name for make_solver. cg was the fastest on every morph system of
+                                   ///< bench/bench_solve.cpp (0.2M-1.7M tets, to residual 1e-8): 4-14x faster than
+                                   ///< cholmod, 66-370x than ldlt, 3-7x than gauss-seidel to its threshold 1e-5
+  SolveOptions solve;              ///< tolerance, iteration limit and (gauss-seidel) change threshold
+  bool warm_start = true;          ///< iterative backends (cg, cg-ic, gauss-seidel, auto) start from s = t instead of 0
 };
+
+/// The Dirichlet problem of solve_harmonic as one linear system A x = b over the unknowns: the interior vertices
+/// of components that touch A or B, numbered in vertex order. A = K_II (SPD), b = -K_IB s_B.
+struct DirichletSystem {
+  SparseMatrixD A;                        ///< #unknowns by #unknowns, both triangles stored
+  Eigen::VectorXd b;                      ///< #unknowns
+  Eigen::VectorXd x0;                     ///< #unknowns: morph time t of each unknown, the warm start s = t
+  Eigen::VectorXd s;                      ///< #V: 0 on A, 1 on B, floating components' mean t; 0 at unknowns
+  std::vector<int> unknown;               ///< #V: the vertex's unknown, or -1 for a fixed vertex
+  std::int64_t floating_components = 0;   ///< see LaplaceResult
+  std::int64_t floating_vertices = 0;
+  std::int64_t degenerate_tets = 0;
+  double assemble_seconds = 0.0;          ///< gradients and stiffness matrix
+};
+
+/// Assembles the system solve_harmonic solves (it calls this), for benchmarks and external solvers.
+/// Throws InvalidInput for inconsistent mesh arrays.
+DirichletSystem dirichlet_system(const TetMesh4& mesh);
 
 struct LaplaceResult {
   Eigen::VectorXd s;                 ///< #V harmonic field, 0 on A, 1 on B

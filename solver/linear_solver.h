@@ -1,9 +1,11 @@
-// Sparse symmetric positive definite solvers behind one interface (paper §6.1 solves the same
-// system by Gauss-Seidel diffusion or by implicit integration with conjugate gradients).
+// Sparse symmetric positive definite solvers behind one interface (paper §6.1 solves the same system by
+// Gauss-Seidel diffusion or by implicit integration with conjugate gradients; Table II compares them).
+// Every backend reports the same diagnostics, so they can be compared side by side (bench/bench_solve.cpp).
 #pragma once
 
 #include <Eigen/Core>
 #include <Eigen/SparseCore>
+#include <cstdint>
 #include <memory>
 #include <string>
 #include <vector>
@@ -13,17 +15,28 @@ namespace morphmap {
 using SparseMatrixD = Eigen::SparseMatrix<double, Eigen::ColMajor, int>;
 
 struct SolveOptions {
-  double tolerance = 1e-10;     ///< iterative backends stop at relative residual |b - Ax| / |b| below this
-  int max_iterations = 20000;   ///< iterative backends give up (SolverError) after this many iterations
+  double tolerance = 1e-10;        ///< cg, cg-ic: stop at relative residual |b - Ax| / |b| below this; auto
+                                   ///< estimates each candidate's time to reach it
+  int max_iterations = 20000;      ///< cg, cg-ic give up (SolverError) after this many iterations; gauss-seidel
+                                   ///< stops (without error) after this many sweeps
+  double change_threshold = 1e-5;  ///< gauss-seidel stops once the mean |change| of s per unknown in one sweep is
+                                   ///< below this (the paper's convergence measure; 1e-5 is Table II's value)
 };
 
-/// Diagnostics of one factorisation plus one solve.
+/// Diagnostics of one set-up (factorisation or preconditioner) plus one solve.
 struct SolveReport {
-  std::string backend;          ///< "cholmod", "cg"
-  int iterations = 0;           ///< CG iterations; for direct solvers, back-substitutions (1 + refinement steps)
-  double residual = 0.0;        ///< final relative residual |b - Ax| / |b| (computed, not estimated)
-  double setup_seconds = 0.0;   ///< analysis + factorisation, or preconditioner set-up
+  std::string backend;            ///< the backend that produced x; for "auto", the one it chose
+  int iterations = 0;             ///< CG iterations or Gauss-Seidel sweeps; for direct solvers, back-substitutions
+                                  ///< (1 + refinement steps)
+  double residual = 0.0;          ///< final relative residual |b - Ax| / |b| (computed, not estimated)
+  double change = 0.0;            ///< gauss-seidel: mean |change| per unknown in the last sweep; 0 for the others
+  double setup_seconds = 0.0;     ///< analysis + factorisation, or preconditioner set-up (auto: plus its probes)
   double solve_seconds = 0.0;
+  /// The solver's own storage in bytes, computed from sizes: factor or preconditioner, work vectors, and for
+  /// cholmod the peak of CHOLMOD's allocations (cholmod_common::memory_usage). It excludes the caller's b and x
+  /// and the copy of A that every backend keeps (nnz * 12 + (n + 1) * 4 bytes), which is the same for all.
+  std::int64_t memory_bytes = 0;
+  std::string detail;             ///< free text; auto: the estimate of every candidate and the choice
 };
 
 /// Stateful solver: `compute` once (factorisation reused), `solve` for any number of right-hand sides.
@@ -40,8 +53,27 @@ class LinearSolver {
 /// Names accepted by make_solver, in the order `--help` lists them.
 std::vector<std::string> solver_names();
 
-/// "cholmod" (supernodal Cholesky) or "cg" (Jacobi-preconditioned conjugate gradients).
+/// Backends:
+///  - "cholmod": supernodal sparse Cholesky (CHOLMOD), factorisation kept for further right-hand sides.
+///  - "cg": conjugate gradients with a Jacobi preconditioner, TBB-parallel, bitwise independent of threads.
+///  - "cg-ic": conjugate gradients with an incomplete Cholesky preconditioner (Eigen::IncompleteCholesky).
+///  - "gauss-seidel": the paper's diffusion, sequential sweeps from the initial guess until the mean change per
+///    unknown falls below SolveOptions::change_threshold (or max_iterations sweeps).
+///  - "ldlt": Eigen::SimplicialLDLT, what libigl's min_quad_with_fixed uses; a reference.
+///  - "auto": measures cholmod, cg and cg-ic on the actual system (see AutoSolver in the .cpp) and runs the one
+///    estimated fastest. Its choice depends on timings, so it is the one backend whose output can vary from run
+///    to run; name a backend for bitwise reproducible results.
 /// Throws InvalidInput for an unknown name.
 std::unique_ptr<LinearSolver> make_solver(const std::string& name, const SolveOptions& options = {});
+
+/// y = A x for a symmetric A stored in full (both triangles), read as CSR: row i is column i of the CSC storage.
+/// TBB-parallel over fixed blocks of rows; each row is summed by one thread in storage order, so y is bitwise
+/// the same for any thread count. The kernel every iterative backend uses. y is resized.
+void symmetric_multiply(const SparseMatrixD& A, const Eigen::VectorXd& x, Eigen::VectorXd& y);
+
+/// Bytes symmetric_multiply must move at least: values and row indices (nnz * (8 + 4)), column starts
+/// ((n + 1) * 4, Eigen's int offsets), x read once and y written once (2 * n * 8). Gathers of x that miss the
+/// cache and the write-allocate read of y come on top, so bytes / seconds is a lower bound of the bandwidth used.
+std::int64_t symmetric_multiply_bytes(const SparseMatrixD& A);
 
 }  // namespace morphmap

@@ -1,0 +1,236 @@
+// Laplace solve, every backend side by side (paper §6.1 and Table II: Gauss-Seidel diffusion against implicit
+// integration with conjugate gradients, 0.2 to 1.7 million tets). The systems are built exactly as
+// solve_harmonic builds them (dirichlet_system) from real morphs: sphere -> torus (built-in shapes), sphere ->
+// bunny ($MORPHMAP_MODELS/bunny_closed.obj) and cow -> horse (cow.off, horse.obj, each normalised to its own
+// bounding box like the pipeline's --align bbox), at about 0.2M, 0.8M and 1.7M tets. Models folder:
+// $MORPHMAP_MODELS, default ../shared/data/models.
+//
+// BM_Solve/<morph>/<size>/<backend>: one compute + solve per iteration from s = t (solve_harmonic's warm start),
+// to relative residual 1e-8 for cg, cg-ic and auto (cholmod and ldlt are direct), and to the paper's change
+// threshold 1e-5 for gauss-seidel (which leaves a residual ~1e-4). Counters: iterations, residual, change
+// (gauss-seidel), setup_seconds, solve_seconds, memory_bytes, unknowns, nnz, tets. ldlt and gauss-seidel are
+// skipped (with a message) where they would take more than about a minute. The label of auto names its choice
+// and its estimates.
+//
+// BM_SpMV/<morph>/<size>: the TBB SpMV every iterative backend runs, with the bytes it must move
+// (symmetric_multiply_bytes) per second as GB/s. The largest matrix (~47 MB) fits in this machine's 105 MB L3, so
+// BM_SpMV/cow-horse/1.7Mx4 also multiplies four copies of it as one block-diagonal matrix (~190 MB) to measure
+// the memory-bound rate.
+//
+// Run: morphmap_bench --benchmark_filter='BM_Solve|BM_SpMV' --benchmark_repetitions=3 --benchmark_format=json
+// Systems are built once per size (a few seconds each, not timed) and cached for all backends and repetitions.
+#include <benchmark/benchmark.h>
+
+#include <cstdlib>
+#include <filesystem>
+#include <map>
+#include <memory>
+#include <optional>
+#include <string>
+#include <vector>
+
+#include "io/mesh_io.h"
+#include "mesh/extract.h"
+#include "mesh/morph.h"
+#include "mesh/shapes.h"
+#include "solver/laplace.h"
+#include "solver/linear_solver.h"
+
+namespace {
+
+using morphmap::SparseMatrixD;
+
+struct Case {
+  std::string morph;  ///< sphere-torus, sphere-bunny, cow-horse
+  std::string size;   ///< label: 0.2M, 0.8M, 1.7M tets (approximately)
+  int voxels;         ///< MorphOptions::voxels
+  int time_steps;     ///< ExtractOptions::time_steps (the paper's Table II: 10, 6 for the bunny)
+};
+
+// Sizes chosen to bracket Table II (220k tets sphere -> torus, 417k sphere -> bunny, 1.69M cow -> horse).
+const std::vector<Case>& cases() {
+  static const std::vector<Case> all = {
+      {"sphere-torus", "0.2M", 12, 10}, {"sphere-torus", "0.8M", 23, 10}, {"sphere-torus", "1.6M", 32, 10},
+      {"sphere-bunny", "0.2M", 14, 6},  {"sphere-bunny", "0.7M", 26, 6},  {"sphere-bunny", "1.6M", 36, 6},
+      {"cow-horse", "0.2M", 24, 10},    {"cow-horse", "0.8M", 45, 10},    {"cow-horse", "1.7M", 64, 10},
+  };
+  return all;
+}
+
+std::string models_dir() {
+  const char* env = std::getenv("MORPHMAP_MODELS");
+  return env ? env : "../shared/data/models";
+}
+
+/// Each surface scaled into its own bounding box centred at the origin, half its largest side = 1 (the
+/// pipeline's --align bbox, app/pipeline.cpp normalise()).
+void normalise(morphmap::Surface& surface) {
+  const Eigen::AlignedBox3d box = morphmap::bounding_box(surface.V);
+  const Eigen::Vector3d center = box.center();
+  surface.V = (surface.V.rowwise() - center.transpose()) / (0.5 * box.sizes().maxCoeff());
+}
+
+struct System {
+  morphmap::DirichletSystem laplace;
+  std::int64_t tets = 0;
+  std::string error;  ///< non-empty when the inputs are missing
+};
+
+/// Builds A, B as the pipeline does (a built-in shape is fitted to the other's bounding box), then the morph,
+/// the 4D mesh and the Dirichlet system. Cached per case: benchmarks and repetitions share it.
+const System& system_for(const Case& c) {
+  static std::map<std::string, std::unique_ptr<System>> cache;
+  auto& slot = cache[c.morph + "/" + c.size];
+  if (slot) return *slot;
+  slot = std::make_unique<System>();
+  morphmap::Surface A, B;
+  const std::string dir = models_dir();
+  if (c.morph == "sphere-torus") {
+    B = morphmap::make_shape(morphmap::parse_shape_spec("torus"), std::nullopt);
+    A = morphmap::make_shape(morphmap::parse_shape_spec("sphere"), morphmap::bounding_box(B.V));
+  } else {
+    const std::string a_path = dir + "/cow.off";
+    const std::string b_path = dir + (c.morph == "sphere-bunny" ? "/bunny_closed.obj" : "/horse.obj");
+    for (const std::string& path : c.morph == "sphere-bunny" ? std::vector<std::string>{b_path}
+                                                              : std::vector<std::string>{a_path, b_path}) {
+      if (!std::filesystem::exists(path)) {
+        slot->error = path + " not found: set MORPHMAP_MODELS to the models folder";
+        return *slot;
+      }
+    }
+    B = morphmap::read_surface(b_path);
+    if (c.morph == "sphere-bunny") {
+      A = morphmap::make_shape(morphmap::parse_shape_spec("sphere"), morphmap::bounding_box(B.V));
+    } else {
+      A = morphmap::read_surface(a_path);
+      normalise(A);
+      normalise(B);
+    }
+  }
+  morphmap::MorphOptions morph_options;
+  morph_options.voxels = c.voxels;
+  const morphmap::MorphResult morph = morphmap::build_morph(A, B, morph_options);
+  morphmap::ExtractOptions extract_options;
+  extract_options.time_steps = c.time_steps;
+  const morphmap::ExtractResult extract = morphmap::extract_hypersurface(morph.field, extract_options);
+  slot->tets = extract.mesh.tet_count();
+  slot->laplace = morphmap::dirichlet_system(extract.mesh);
+  return *slot;
+}
+
+// Beyond these sizes the reference backends would take more than about a minute per solve on this machine
+// (2 cores): ldlt took 39 s at 31k unknowns and grows faster than n^1.5 (DESIGN.md: 108 s at 125k); gauss-seidel
+// takes ~0.5 us per unknown per sweep and needs more sweeps as the mesh refines.
+constexpr Eigen::Index kLdltMaxUnknowns = 40000;
+constexpr Eigen::Index kGaussSeidelMaxUnknowns = 1000000;
+
+void BM_Solve(benchmark::State& state, const Case& c, const std::string& backend) {
+  const System& system = system_for(c);
+  if (!system.error.empty()) {
+    state.SkipWithError(system.error.c_str());
+    return;
+  }
+  const morphmap::DirichletSystem& s = system.laplace;
+  const Eigen::Index n = s.A.rows();
+  if ((backend == "ldlt" && n > kLdltMaxUnknowns) || (backend == "gauss-seidel" && n > kGaussSeidelMaxUnknowns)) {
+    const std::string message = "skipped: " + backend + " would take over ~60 s on " + std::to_string(n) +
+                                " unknowns (limit " +
+                                std::to_string(backend == "ldlt" ? kLdltMaxUnknowns : kGaussSeidelMaxUnknowns) + ")";
+    state.SkipWithError(message.c_str());
+    return;
+  }
+  morphmap::SolveOptions options;
+  options.tolerance = 1e-8;
+  options.max_iterations = 100000;
+  options.change_threshold = 1e-5;  // Table II
+  morphmap::SolveReport report;
+  for (auto _ : state) {
+    auto solver = morphmap::make_solver(backend, options);
+    Eigen::VectorXd x = s.x0;  // s = t, as solve_harmonic's warm start
+    solver->compute(s.A);
+    report = solver->solve(s.b, x);
+    benchmark::DoNotOptimize(x.data());
+  }
+  state.counters["iterations"] = report.iterations;
+  state.counters["residual"] = report.residual;
+  // Only where it means something: a counter that is 0 in every repetition makes the cv aggregate NaN, which is
+  // not valid JSON.
+  if (backend == "gauss-seidel") state.counters["change"] = report.change;
+  state.counters["setup_seconds"] = report.setup_seconds;
+  state.counters["solve_seconds"] = report.solve_seconds;
+  state.counters["memory_bytes"] = static_cast<double>(report.memory_bytes);
+  state.counters["unknowns"] = static_cast<double>(n);
+  state.counters["nnz"] = static_cast<double>(s.A.nonZeros());
+  state.counters["tets"] = static_cast<double>(system.tets);
+  state.SetLabel(report.detail.empty() ? report.backend : report.detail);
+}
+
+/// `copies` copies of A on the diagonal: the same rows, more bytes than the last-level cache holds.
+SparseMatrixD block_diagonal(const SparseMatrixD& A, int copies) {
+  const Eigen::Index n = A.rows();
+  SparseMatrixD M(copies * n, copies * n);
+  M.reserve(copies * A.nonZeros());
+  for (int c = 0; c < copies; ++c) {
+    for (Eigen::Index j = 0; j < n; ++j) {
+      M.startVec(c * n + j);
+      for (SparseMatrixD::InnerIterator it(A, j); it; ++it) M.insertBack(c * n + it.row(), c * n + j) = it.value();
+    }
+  }
+  M.finalize();
+  return M;
+}
+
+void BM_SpMV(benchmark::State& state, const Case& c, int copies) {
+  const System& system = system_for(c);
+  if (!system.error.empty()) {
+    state.SkipWithError(system.error.c_str());
+    return;
+  }
+  static std::map<std::string, SparseMatrixD> big;  // block-diagonal copies, built once
+  const SparseMatrixD* A = &system.laplace.A;
+  if (copies > 1) {
+    SparseMatrixD& slot = big[c.morph + "/" + c.size + "x" + std::to_string(copies)];
+    if (slot.rows() == 0) slot = block_diagonal(*A, copies);
+    A = &slot;
+  }
+  Eigen::VectorXd x = Eigen::VectorXd::LinSpaced(A->cols(), 0.0, 1.0), y;
+  morphmap::symmetric_multiply(*A, x, y);  // first touch of y outside the timing
+  for (auto _ : state) {
+    morphmap::symmetric_multiply(*A, x, y);
+    benchmark::DoNotOptimize(y.data());
+    benchmark::ClobberMemory();
+  }
+  const double bytes = static_cast<double>(morphmap::symmetric_multiply_bytes(*A));
+  state.SetBytesProcessed(static_cast<std::int64_t>(bytes) * state.iterations());
+  state.counters["GBps"] = benchmark::Counter(bytes * 1e-9, benchmark::Counter::kIsIterationInvariantRate);
+  state.counters["bytes_per_spmv"] = bytes;
+  state.counters["unknowns"] = static_cast<double>(A->rows());
+  state.counters["nnz"] = static_cast<double>(A->nonZeros());
+}
+
+/// Registered at start-up so that every (morph, size, backend) gets its own name.
+const bool registered = [] {
+  for (const Case& c : cases()) {
+    for (const std::string& backend : morphmap::solver_names()) {
+      benchmark::RegisterBenchmark(("BM_Solve/" + c.morph + "/" + c.size + "/" + backend).c_str(),
+                                   [c, backend](benchmark::State& state) { BM_Solve(state, c, backend); })
+          ->Iterations(1)
+          ->UseRealTime()
+          ->Unit(benchmark::kMillisecond);
+    }
+  }
+  for (const Case& c : cases()) {
+    benchmark::RegisterBenchmark(("BM_SpMV/" + c.morph + "/" + c.size).c_str(),
+                                 [c](benchmark::State& state) { BM_SpMV(state, c, 1); })
+        ->UseRealTime()
+        ->Unit(benchmark::kMicrosecond);
+  }
+  const Case& largest = cases().back();
+  benchmark::RegisterBenchmark(("BM_SpMV/" + largest.morph + "/" + largest.size + "x4").c_str(),
+                               [largest](benchmark::State& state) { BM_SpMV(state, largest, 4); })
+      ->UseRealTime()
+      ->Unit(benchmark::kMicrosecond);
+  return true;
+}();
+
+}  // namespace
