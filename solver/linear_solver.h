@@ -26,8 +26,8 @@ struct SolveOptions {
 /// Diagnostics of one set-up (factorisation or preconditioner) plus one solve.
 struct SolveReport {
   std::string backend;            ///< the backend that produced x; for "auto", the one it chose
-  int iterations = 0;             ///< CG iterations or Gauss-Seidel sweeps; for direct solvers, back-substitutions
-                                  ///< (1 + refinement steps)
+  int iterations = 0;             ///< CG iterations (auto: its probe's included) or Gauss-Seidel sweeps; for
+                                  ///< direct solvers, back-substitutions (1 + refinement steps)
   double residual = 0.0;          ///< final relative residual |b - Ax| / |b| (computed, not estimated)
   double change = 0.0;            ///< gauss-seidel: mean |change| per unknown in the last sweep; 0 for the others
   double setup_seconds = 0.0;     ///< analysis + factorisation, or preconditioner set-up (auto: plus its probes)
