@@ -20,6 +20,7 @@
 #include "io/mesh_io.h"
 #include "io/output_dir.h"
 #include "mesh/errors.h"
+#include "mesh/stopwatch.h"
 #include "mesh/quality.h"
 #include "mesh/shapes.h"
 #include "mesh/transfer.h"
@@ -28,8 +29,6 @@
 namespace morphmap {
 namespace {
 
-using Clock = std::chrono::steady_clock;
-double seconds_since(Clock::time_point start) { return std::chrono::duration<double>(Clock::now() - start).count(); }
 
 // Similarity x -> (x - center) / scale that brings a surface into the common morph frame.
 struct Frame {

@@ -15,15 +15,10 @@
 #include <vector>
 
 #include "mesh/errors.h"
+#include "mesh/stopwatch.h"
 
 namespace morphmap {
 namespace {
-
-using Clock = std::chrono::steady_clock;
-
-double seconds_since(Clock::time_point start) {
-  return std::chrono::duration<double>(Clock::now() - start).count();
-}
 
 // det(E^T E) <= product of its diagonal (Hadamard), and the determinant of a 3x3 Gram matrix carries an
 // absolute rounding error of a few ulps of that product. Below this ratio the volume and the inverse are

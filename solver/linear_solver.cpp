@@ -20,15 +20,10 @@
 #include <sstream>
 
 #include "mesh/errors.h"
+#include "mesh/stopwatch.h"
 
 namespace morphmap {
 namespace {
-
-using Clock = std::chrono::steady_clock;
-
-double seconds_since(Clock::time_point start) {
-  return std::chrono::duration<double>(Clock::now() - start).count();
-}
 
 // Relative tolerance of the symmetry check: assembly sums the same products for (i, j) and (j, i), so
 // a real system is symmetric to rounding; anything larger is a caller's bug, not noise.
