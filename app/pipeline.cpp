@@ -286,7 +286,6 @@ PipelineResult run_pipeline(const PipelineOptions& options) {
                        {"prisms", extract.prisms},
                        {"snapped_values", extract.snapped_values},
                        {"candidate_cubes", extract.candidate_cubes},
-                       {"degenerate_tets", extract.degenerate_tets},
                        {"scratch_bytes", extract.scratch_bytes}};
   report["mesh_quality"] = {
       {"tets", quality.tets},

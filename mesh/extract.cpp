@@ -13,6 +13,9 @@
 // buffers: output order and ids are fixed by the lattice alone, whatever the thread count.
 #include "mesh/extract.h"
 
+#ifdef __linux__
+#include <sys/mman.h>
+#endif
 #include <tbb/blocked_range.h>
 #include <tbb/enumerable_thread_specific.h>
 #include <tbb/parallel_for.h>
@@ -60,20 +63,89 @@ const KuhnTable kKuhn;
 constexpr int kPrismRotation[6][6] = {{0, 1, 2, 3, 4, 5}, {1, 2, 0, 4, 5, 3}, {2, 0, 1, 5, 3, 4},
                                       {3, 5, 4, 0, 2, 1}, {4, 3, 5, 1, 0, 2}, {5, 4, 3, 2, 1, 0}};
 
-// Splits a prism into three tets (indices into `id`) with diagonals chosen by global vertex id.
-int split_prism(const std::array<int, 6>& id, int out[3][4]) {
-  const int vmin = int(std::min_element(id.begin(), id.end()) - id.begin());
+// The two ways to split a prism rotated so that its smallest-id vertex is 0: tets as prism vertices
+// before rotation is applied.
+constexpr int kPrismSplit[2][3][4] = {{{0, 1, 2, 5}, {0, 1, 5, 4}, {0, 4, 5, 3}},
+                                      {{0, 1, 2, 4}, {0, 4, 2, 5}, {0, 4, 5, 3}}};
+
+// Split of a prism into three tets with diagonals chosen by global vertex id: returns 2 * rotation + choice.
+inline int prism_split(const int id[6]) {
+  const int vmin = int(std::min_element(id, id + 6) - id);
   const int* r = kPrismRotation[vmin];
-  auto k = [&](int i) { return id[std::size_t(r[i])]; };
-  if (std::min(k(1), k(5)) < std::min(k(2), k(4))) {
-    const int t[3][4] = {{r[0], r[1], r[2], r[5]}, {r[0], r[1], r[5], r[4]}, {r[0], r[4], r[5], r[3]}};
-    std::copy(&t[0][0], &t[0][0] + 12, &out[0][0]);
-  } else {
-    const int t[3][4] = {{r[0], r[1], r[2], r[4]}, {r[0], r[4], r[2], r[5]}, {r[0], r[4], r[5], r[3]}};
-    std::copy(&t[0][0], &t[0][0] + 12, &out[0][0]);
-  }
-  return 3;
+  return 2 * vmin + (std::min(id[r[1]], id[r[5]]) < std::min(id[r[2]], id[r[4]]) ? 0 : 1);
 }
+
+// Marching-pentatope cases of one Kuhn simplex s and one sign pattern of its five vertices (bit q set
+// when simplex vertex q is positive). The tets are listed as indices into the case's crossing edges and
+// already oriented. Orientation is a combinatorial invariant: the cut of a non-degenerate pentatope by
+// the zero set of a linear field with a given sign pattern never degenerates as the crossings slide
+// along their edges, and positive axis scalings keep the sign of cross4 . grad d. So it is decided once
+// on the unit hypercube with crossings at edge midpoints, instead of with a cross product per output
+// tet (which also misjudged tiny tets near a lattice corner in floating point).
+struct PentatopeCase {
+  int edges = 0;                  // 0 (no crossing), 4 (1|4 split) or 6 (2|3 split)
+  int a[6] = {}, b[6] = {};       // crossing edges as hypercube corner pairs, a < b
+  int lone[4] = {};               // 1|4 split: the tet
+  int prism[12][3][4] = {};       // 2|3 split: the three tets of split 2 * rotation + choice (see prism_split)
+};
+
+struct CaseTable {
+  PentatopeCase cases[24][32];
+  CaseTable() {
+    for (int s = 0; s < 24; ++s)
+      for (int mask = 1; mask < 31; ++mask) build(s, mask, cases[s][mask]);
+  }
+
+  static void build(int s, int mask, PentatopeCase& c) {
+    const auto& cm = kKuhn.corner[std::size_t(s)];
+    int P[5], N[5], np = 0, nn = 0;
+    for (int q = 0; q < 5; ++q) (mask & (1 << q) ? P[np++] : N[nn++]) = cm[std::size_t(q)];
+    auto set_edge = [&](int e, int u, int v) {
+      c.a[e] = std::min(u, v);
+      c.b[e] = std::max(u, v);
+    };
+    if (np == 1 || nn == 1) {
+      const int lone = np == 1 ? P[0] : N[0];
+      const int* others = np == 1 ? N : P;
+      c.edges = 4;
+      for (int q = 0; q < 4; ++q) set_edge(q, lone, others[q]);
+      const int tet[4] = {0, 1, 2, 3};
+      orient(mask, s, c, tet, c.lone);
+    } else {
+      const int* pair = np == 2 ? P : N;
+      const int* triple = np == 2 ? N : P;
+      c.edges = 6;
+      for (int q = 0; q < 3; ++q) {
+        set_edge(q, pair[0], triple[q]);
+        set_edge(q + 3, pair[1], triple[q]);
+      }
+      for (int split = 0; split < 12; ++split)
+        for (int t = 0; t < 3; ++t) {
+          int tet[4];
+          for (int q = 0; q < 4; ++q) tet[q] = kPrismRotation[split / 2][kPrismSplit[split % 2][t][q]];
+          orient(mask, s, c, tet, c.prism[split][t]);
+        }
+    }
+  }
+
+  // Writes tet (edge indices) to out, swapping two vertices when cross4 would point where d decreases.
+  static void orient(int mask, int s, const PentatopeCase& c, const int tet[4], int out[4]) {
+    auto corner = [](int bits) {
+      return Eigen::Vector4d(bits & 1 ? 1.0 : 0.0, bits & 2 ? 1.0 : 0.0, bits & 4 ? 1.0 : 0.0, bits & 8 ? 1.0 : 0.0);
+    };
+    Eigen::Vector4d p[4];
+    for (int q = 0; q < 4; ++q) p[q] = 0.5 * (corner(c.a[tet[q]]) + corner(c.b[tet[q]]));
+    // Field +1 at positive vertices, -1 at negative ones: its gradient along the Kuhn walk.
+    Eigen::Vector4d g;
+    for (int q = 0; q < 4; ++q) {
+      const double f0 = mask & (1 << q) ? 1.0 : -1.0, f1 = mask & (1 << (q + 1)) ? 1.0 : -1.0;
+      g(kKuhn.axis[std::size_t(s)][std::size_t(q)]) = f1 - f0;
+    }
+    const bool swap = cross4(p[1] - p[0], p[2] - p[0], p[3] - p[0]).dot(g) < 0.0;
+    out[0] = tet[0], out[1] = tet[1], out[2] = swap ? tet[3] : tet[2], out[3] = swap ? tet[2] : tet[3];
+  }
+};
+const CaseTable kCases;
 
 struct Lattice {
   const MorphField& field;
@@ -133,6 +205,19 @@ unsigned owned_edges(const Cell& c, int K) {
 
 constexpr std::int64_t kChunkCubes = 64;
 
+// The output arrays are first touched by pass 2, one 4 KiB page fault at a time; asking for transparent
+// huge pages (the kernel default is madvise-only) cuts that cost. A hint: failure is harmless.
+void advise_huge_pages(void* data, std::size_t bytes) {
+#ifdef __linux__
+  constexpr std::uintptr_t kHuge = std::uintptr_t(2) << 20;
+  const std::uintptr_t begin = (reinterpret_cast<std::uintptr_t>(data) + kHuge - 1) & ~(kHuge - 1);
+  const std::uintptr_t end = (reinterpret_cast<std::uintptr_t>(data) + bytes) & ~(kHuge - 1);
+  if (end > begin) madvise(reinterpret_cast<void*>(begin), end - begin, MADV_HUGEPAGE);
+#else
+  (void)data, (void)bytes;
+#endif
+}
+
 // Bit count without the libgcc call that std::bitset::count becomes on baseline x86-64 (measured 2%).
 inline int bit_count(std::uint32_t x) {
   x = x - ((x >> 1) & 0x55555555u);
@@ -172,7 +257,6 @@ ExtractResult extract_hypersurface(const MorphField& field, const ExtractOptions
                     dims.x() - 1,
                     dims.y() - 1,
                     dims.z() - 1};
-  const double inverse_spacing[4] = {1.0 / lat.h, 1.0 / lat.h, 1.0 / lat.h, 1.0 / lat.dt};
   for (std::size_t q = 0; q < field.dA.size(); ++q)
     result.snapped_values += (std::abs(field.dA[q]) < lat.snap) + (std::abs(field.dB[q]) < lat.snap);
 
@@ -280,6 +364,9 @@ ExtractResult extract_hypersurface(const MorphField& field, const ExtractOptions
   mesh.T.resize(tet_count, 4);
   mesh.source_cell.resize(std::size_t(tet_count));
   mesh.side.assign(std::size_t(vertex_count), VertexSide::Interior);
+  advise_huge_pages(mesh.V.data(), std::size_t(mesh.V.size()) * sizeof(double));
+  advise_huge_pages(mesh.T.data(), std::size_t(mesh.T.size()) * sizeof(int));
+  advise_huge_pages(mesh.source_cell.data(), mesh.source_cell.size() * sizeof(std::int64_t));
 
   // Vertex id of the crossing on edge (a, b) of the current cell, a subset of b: the edge belongs to the
   // cell whose lower corner is corner a (the top-slab cell for spatial edges at t = 1).
@@ -293,19 +380,15 @@ ExtractResult extract_hypersurface(const MorphField& field, const ExtractOptions
     return int(vertex_base[slot] + bit_count(cell_bits[slot] & ((1u << bit) - 1u)));
   };
 
-  // Pass 2: owned vertices, then tets, oriented so cross4 points where d increases.
-  // |cross4| = 6 * volume; degenerate below 1e-12 h^3.
-  const double degenerate_norm2 = std::pow(6e-12 * lat.h * lat.h * lat.h, 2);
-  std::vector<std::int64_t> chunk_degenerate(std::size_t(chunks), 0);
-  // Per-thread cache of one cell's crossing ids and positions, valid where stamp == the cell's serial.
+  // Pass 2: owned vertices, then tets (oriented by the case table).
+  // Per-thread cache of one cell's crossing ids, valid where stamp == the cell's serial.
   struct EdgeCache {
     std::uint32_t serial = 0;
     std::uint32_t stamp[16][16] = {};
     int id[16][16];
-    Eigen::Vector4d point[16][16];
   };
   tbb::enumerable_thread_specific<std::unique_ptr<EdgeCache>> caches([] { return std::make_unique<EdgeCache>(); });
-  for_each_active_cell([&](std::int64_t c, std::size_t slot, const Cell& cell) {
+  for_each_active_cell([&](std::int64_t, std::size_t slot, const Cell& cell) {
     EdgeCache* cache = caches.local().get();
     const std::uint32_t serial = ++cache->serial;
     const int l = cell.level;
@@ -319,69 +402,37 @@ ExtractResult extract_hypersurface(const MorphField& field, const ExtractOptions
       mesh.side[std::size_t(id)] = top ? VertexSide::B : (l == 0 && m < 8 ? VertexSide::A : VertexSide::Interior);
       ++id;
     }
-    auto edge = [&](int a, int b) {
-      if (a > b) std::swap(a, b);
+    auto edge_id = [&](int a, int b) {
       if (cache->stamp[a][b] != serial) {
         cache->stamp[a][b] = serial;
         cache->id[a][b] = vertex_id(cell, a, b);
-        cache->point[a][b] = lat.crossing(cell.i + (a & 1), cell.j + ((a >> 1) & 1), cell.k + ((a >> 2) & 1),
-                                          l + (a >> 3), a ^ b, cell.f[a], cell.f[b]);
       }
-      return std::pair<int, const Eigen::Vector4d*>(cache->id[a][b], &cache->point[a][b]);
+      return cache->id[a][b];
     };
     std::int64_t row = tet_offset[slot];
     const std::int64_t source_base = (cell.base3 + lat.n3 * l) * 24;
     for (int s = 0; s < 24; ++s) {
-      const int positives = bit_count(cell.positive & kKuhn.corner_set[std::size_t(s)]);
-      if (positives == 0 || positives == 5) continue;
       const auto& cm = kKuhn.corner[std::size_t(s)];
-      int P[5], N[5], np = 0, nn = 0;
-      for (int q = 0; q < 5; ++q) (cell.positive & (1u << cm[std::size_t(q)]) ? P[np++] : N[nn++]) = cm[std::size_t(q)];
-      // Gradient of the simplex's linear interpolant, one axis per step of the Kuhn walk.
-      Eigen::Vector4d g;
-      for (int q = 0; q < 4; ++q) {
-        const int axis = kKuhn.axis[std::size_t(s)][std::size_t(q)];
-        g(axis) = (double(cell.f[cm[std::size_t(q) + 1]]) - double(cell.f[cm[std::size_t(q)]])) * inverse_spacing[axis];
-      }
-      std::array<std::pair<int, int>, 6> edges;
-      int tets[3][4];
-      int count;
-      if (np == 1 || nn == 1) {
-        const int lone = np == 1 ? P[0] : N[0];
-        const int* others = np == 1 ? N : P;
-        for (int q = 0; q < 4; ++q) edges[std::size_t(q)] = {lone, others[q]};
-        tets[0][0] = 0, tets[0][1] = 1, tets[0][2] = 2, tets[0][3] = 3;
-        count = 1;
-      } else {
-        const int* pair = np == 2 ? P : N;
-        const int* triple = np == 2 ? N : P;
-        std::array<int, 6> ids;
-        for (int q = 0; q < 3; ++q) {
-          edges[std::size_t(q)] = {pair[0], triple[q]};
-          edges[std::size_t(q) + 3] = {pair[1], triple[q]};
-        }
-        for (int q = 0; q < 6; ++q)
-          ids[std::size_t(q)] = edge(edges[std::size_t(q)].first, edges[std::size_t(q)].second).first;
-        count = split_prism(ids, tets);
-      }
-      for (int t = 0; t < count; ++t) {
-        int v[4];
-        const Eigen::Vector4d* p[4];
-        for (int q = 0; q < 4; ++q) {
-          const auto& e = edges[std::size_t(tets[t][q])];
-          std::tie(v[q], p[q]) = edge(e.first, e.second);
-        }
-        const Eigen::Vector4d n = cross4(*p[1] - *p[0], *p[2] - *p[0], *p[3] - *p[0]);
-        if (n.dot(g) < 0.0) std::swap(v[2], v[3]);
-        chunk_degenerate[std::size_t(c)] += n.squaredNorm() <= degenerate_norm2;
-        mesh.T.row(row) << v[0], v[1], v[2], v[3];
+      int mask = 0;
+      for (int q = 0; q < 5; ++q) mask |= int((cell.positive >> cm[std::size_t(q)]) & 1u) << q;
+      const PentatopeCase& pc = kCases.cases[s][mask];
+      if (pc.edges == 0) continue;
+      int ids[6];
+      for (int e = 0; e < pc.edges; ++e) ids[e] = edge_id(pc.a[e], pc.b[e]);
+      auto emit = [&](const int tet[4]) {
+        mesh.T.row(row) << ids[tet[0]], ids[tet[1]], ids[tet[2]], ids[tet[3]];
         mesh.source_cell[std::size_t(row)] = source_base + s;
         ++row;
+      };
+      if (pc.edges == 4) {
+        emit(pc.lone);
+      } else {
+        const auto& split = pc.prism[prism_split(ids)];
+        for (int t = 0; t < 3; ++t) emit(split[t]);
       }
     }
   });
 
-  for (std::int64_t c = 0; c < chunks; ++c) result.degenerate_tets += chunk_degenerate[std::size_t(c)];
   result.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
   return result;
 }

@@ -27,7 +27,6 @@ struct ExtractResult {
   std::int64_t active_cells = 0;      ///< 4D hypercubes with a sign change
   std::int64_t snapped_values = 0;    ///< values of dA and dB within zero_snap of zero (moved off zero)
   std::int64_t prisms = 0;            ///< pentatopes cut in a prism (2|3 split), 3 tets each
-  std::int64_t degenerate_tets = 0;   ///< tets with 3-volume below 1e-12 h^3, kept (they add nothing to the Laplacian)
   std::int64_t scratch_bytes = 0;     ///< per-cell tables used besides the output mesh
 };
 
