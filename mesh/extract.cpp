@@ -83,10 +83,10 @@ inline int prism_split(const int id[6]) {
 // on the unit hypercube with crossings at edge midpoints, instead of with a cross product per output
 // tet (which also misjudged tiny tets near a lattice corner in floating point).
 struct PentatopeCase {
-  int edges = 0;                  // 0 (no crossing), 4 (1|4 split) or 6 (2|3 split)
-  int a[6] = {}, b[6] = {};       // crossing edges as hypercube corner pairs, a < b
-  int lone[4] = {};               // 1|4 split: the tet
-  int prism[12][3][4] = {};       // 2|3 split: the three tets of split 2 * rotation + choice (see prism_split)
+  int edges = 0;             // 0 (no crossing), 4 (1|4 split) or 6 (2|3 split)
+  int a[6] = {}, b[6] = {};  // crossing edges as hypercube corner pairs, a < b
+  int lone[4] = {};          // 1|4 split: the tet
+  int prism[12][3][4] = {};  // 2|3 split: the three tets of split 2 * rotation + choice (see prism_split)
 };
 
 struct CaseTable {
