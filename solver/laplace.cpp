@@ -4,6 +4,8 @@
 // off-diagonals are the -(1/6) l_kl cot(theta_kl) weights of the paper's operator.
 #include "solver/laplace.h"
 
+#include <tbb/blocked_range.h>
+#include <tbb/enumerable_thread_specific.h>
 #include <tbb/parallel_for.h>
 
 #include <Eigen/Dense>
@@ -25,9 +27,12 @@ namespace {
 // rounding noise, and a tet that flat is treated as having none.
 constexpr double kDegenerateGramRatio = 1e-14;
 
-// Tets per assembly chunk: fixed so the triplet order, and hence the summation order of duplicates in
-// setFromTriplets, is the same for any thread count.
-constexpr Eigen::Index kChunkTets = 8192;
+// Rows per assembly block: fixed so the work split, and with it every bit of the result, is the same for any
+// thread count (each row is summed by one task in incident-tet order anyway).
+constexpr Eigen::Index kBlockRows = 2048;
+
+// Packed index of the symmetric 4x4 local stiffness entry (i, j).
+constexpr int kPacked[4][4] = {{0, 1, 2, 3}, {1, 4, 5, 6}, {2, 5, 7, 8}, {3, 6, 8, 9}};
 
 void check_mesh_arrays(const Points4& V, const TetIndices& T, const char* who) {
   if (V.cols() != 4) {
@@ -45,44 +50,141 @@ void check_mesh_arrays(const Points4& V, const TetIndices& T, const char* who) {
   }
 }
 
-/// K = sum vol * G_t^T G_t from precomputed gradients; tets with zero volume are skipped.
-SparseMatrixD assemble_stiffness(const TetIndices& T, const Eigen::MatrixXd& G, const Eigen::VectorXd& vol,
-                                 Eigen::Index vertex_count) {
-  using Triplet = Eigen::Triplet<double, int>;
+/// The 10 distinct entries vol * grad_i . grad_j of every tet's local stiffness (#T by 10, see kPacked) and its
+/// volume (0 for a degenerate tet, whose entries are then 0).
+void local_stiffness(const Points4& V, const TetIndices& T,
+                     Eigen::Matrix<double, Eigen::Dynamic, 10, Eigen::RowMajor>& L, Eigen::VectorXd& vol) {
   const Eigen::Index tets = T.rows();
-  const Eigen::Index chunks = (tets + kChunkTets - 1) / kChunkTets;
-
-  // Count first so every chunk writes its own slice of one buffer: no per-thread vectors to merge and the
-  // chunk order is the buffer order.
-  std::vector<std::size_t> offset(static_cast<std::size_t>(chunks) + 1, 0);
-  tbb::parallel_for(Eigen::Index(0), chunks, [&](Eigen::Index chunk) {
-    const Eigen::Index end = std::min(tets, (chunk + 1) * kChunkTets);
-    std::size_t count = 0;
-    for (Eigen::Index t = chunk * kChunkTets; t < end; ++t) count += vol(t) > 0.0 ? 16 : 0;
-    offset[static_cast<std::size_t>(chunk) + 1] = count;
+  L.resize(tets, 10);
+  vol.resize(tets);
+  tbb::parallel_for(tbb::blocked_range<Eigen::Index>(0, tets, 4096), [&](const tbb::blocked_range<Eigen::Index>& r) {
+    for (Eigen::Index t = r.begin(); t != r.end(); ++t) {
+      Eigen::Matrix<double, 4, 3> E;
+      Eigen::Matrix3d gram_inverse;
+      double volume = 0.0;
+      if (!tet_frame(V, T, t, E, gram_inverse, volume)) {
+        L.row(t).setZero();
+        vol(t) = 0.0;
+        continue;
+      }
+      // Gradients of hats 1..3 are E Gram^-1 e_i, so their dot products are Gram^-1 itself; hat 0's gradient is
+      // minus their sum. The same double serves (i, j) and (j, i): K comes out bitwise symmetric.
+      const Eigen::Matrix3d& M = gram_inverse;
+      const Eigen::Vector3d row_sum = M.rowwise().sum();
+      L(t, kPacked[0][0]) = volume * row_sum.sum();
+      for (int i = 0; i < 3; ++i) {
+        L(t, kPacked[0][i + 1]) = -volume * row_sum(i);
+        for (int j = i; j < 3; ++j) L(t, kPacked[i + 1][j + 1]) = volume * M(i, j);
+      }
+      vol(t) = volume;
+    }
   });
-  std::partial_sum(offset.begin(), offset.end(), offset.begin());
+}
 
-  std::vector<Triplet> triplets(offset.back());
-  tbb::parallel_for(Eigen::Index(0), chunks, [&](Eigen::Index chunk) {
-    const Eigen::Index end = std::min(tets, (chunk + 1) * kChunkTets);
-    std::size_t k = offset[static_cast<std::size_t>(chunk)];
-    for (Eigen::Index t = chunk * kChunkTets; t < end; ++t) {
+/// Rows of K = sum of local stiffness restricted to the `unknown` vertices (#V entries: the row/column index of
+/// the vertex, or -1 for a fixed vertex), assembled straight into compressed storage: A (#unknowns square,
+/// both triangles) and, when b is given, b = -K_IB s with the fixed vertices' values s. Written by hand because
+/// Eigen's setFromTriplets is sequential and needs a 16-entry triplet per tet (256 bytes a tet); here every row
+/// is one task: it walks its vertex's incident tets in tet order, so each entry is summed in the same order
+/// whatever the thread count, and (i, j) and (j, i) add the same doubles in the same order.
+void assemble_rows(const TetIndices& T, const Eigen::Matrix<double, Eigen::Dynamic, 10, Eigen::RowMajor>& L,
+                   const Eigen::VectorXd& vol, const std::vector<int>& unknown, int unknowns, const Eigen::VectorXd* s,
+                   SparseMatrixD& A, Eigen::VectorXd* b) {
+  const Eigen::Index n = static_cast<Eigen::Index>(unknown.size());
+  const Eigen::Index tets = T.rows();
+  // Vertex -> incident tets with stiffness (CSR), sorted by tet within each vertex.
+  std::vector<std::int64_t> start(static_cast<std::size_t>(n) + 1, 0);
+  for (Eigen::Index t = 0; t < tets; ++t) {
+    if (!(vol(t) > 0.0)) continue;
+    for (int k = 0; k < 4; ++k) ++start[static_cast<std::size_t>(T(t, k)) + 1];
+  }
+  std::partial_sum(start.begin(), start.end(), start.begin());
+  std::vector<int> incident(static_cast<std::size_t>(start.back()));
+  {
+    std::vector<std::int64_t> cursor(start.begin(), start.end() - 1);
+    for (Eigen::Index t = 0; t < tets; ++t) {
       if (!(vol(t) > 0.0)) continue;
-      for (int i = 0; i < 4; ++i) {
-        for (int j = 0; j < 4; ++j) {
-          // The same product for (i, j) and (j, i), summed in the same tet order: K is bitwise symmetric.
-          const double value = vol(t) * G.row(4 * t + i).dot(G.row(4 * t + j));
-          triplets[k++] = Triplet(T(t, i), T(t, j), value);
+      for (int k = 0; k < 4; ++k)
+        incident[static_cast<std::size_t>(cursor[static_cast<std::size_t>(T(t, k))]++)] = int(t);
+    }
+  }
+  // Vertex of each unknown, in unknown order (the numbering is monotone in the vertex index).
+  std::vector<int> vertex_of(static_cast<std::size_t>(unknowns));
+  for (Eigen::Index v = 0; v < n; ++v)
+    if (unknown[static_cast<std::size_t>(v)] >= 0)
+      vertex_of[static_cast<std::size_t>(unknown[static_cast<std::size_t>(v)])] = int(v);
+
+  // Per-thread scratch: slot[col] = position of column col in the row being built, -1 when absent.
+  struct Scratch {
+    std::vector<int> slot;
+    std::vector<std::pair<int, double>> row;
+  };
+  tbb::enumerable_thread_specific<Scratch> scratch([&] {
+    return Scratch{std::vector<int>(std::size_t(unknowns), -1), {}};
+  });
+  // Builds row u into scratch.row (columns sorted) and returns b's entry for it.
+  auto build_row = [&](Scratch& w, int u, bool values) {
+    const int v = vertex_of[static_cast<std::size_t>(u)];
+    w.row.clear();
+    double rhs = 0.0;
+    for (std::int64_t q = start[static_cast<std::size_t>(v)]; q < start[static_cast<std::size_t>(v) + 1]; ++q) {
+      const int t = incident[static_cast<std::size_t>(q)];
+      int li = 0;
+      while (T(t, li) != v) ++li;
+      for (int lj = 0; lj < 4; ++lj) {
+        const int col_vertex = T(t, lj);
+        const int col = unknown[static_cast<std::size_t>(col_vertex)];
+        const double value = values ? L(t, kPacked[li][lj]) : 0.0;
+        if (col < 0) {
+          if (values && s != nullptr) rhs -= value * (*s)(col_vertex);
+          continue;
+        }
+        int& slot = w.slot[static_cast<std::size_t>(col)];
+        if (slot < 0) {
+          slot = int(w.row.size());
+          w.row.emplace_back(col, value);
+        } else {
+          w.row[static_cast<std::size_t>(slot)].second += value;
         }
       }
     }
-  });
+    for (const auto& e : w.row) w.slot[static_cast<std::size_t>(e.first)] = -1;
+    std::sort(w.row.begin(), w.row.end(), [](const auto& x, const auto& y) { return x.first < y.first; });
+    return rhs;
+  };
 
-  SparseMatrixD K(vertex_count, vertex_count);
-  K.setFromTriplets(triplets.begin(), triplets.end());
-  K.makeCompressed();
-  return K;
+  const Eigen::Index blocks = (unknowns + kBlockRows - 1) / kBlockRows;
+  A.resize(unknowns, unknowns);
+  A.data().clear();
+  int* outer = A.outerIndexPtr();
+  outer[0] = 0;
+  tbb::parallel_for(Eigen::Index(0), blocks, [&](Eigen::Index block) {
+    Scratch& w = scratch.local();
+    const int end = int(std::min<Eigen::Index>(unknowns, (block + 1) * kBlockRows));
+    for (int u = int(block * kBlockRows); u < end; ++u) {
+      build_row(w, u, false);
+      outer[u + 1] = int(w.row.size());
+    }
+  });
+  for (int u = 0; u < unknowns; ++u) outer[u + 1] += outer[u];
+  A.resizeNonZeros(outer[unknowns]);
+  if (b != nullptr) b->setZero(unknowns);
+  int* inner = A.innerIndexPtr();
+  double* value = A.valuePtr();
+  tbb::parallel_for(Eigen::Index(0), blocks, [&](Eigen::Index block) {
+    Scratch& w = scratch.local();
+    const int end = int(std::min<Eigen::Index>(unknowns, (block + 1) * kBlockRows));
+    for (int u = int(block * kBlockRows); u < end; ++u) {
+      const double rhs = build_row(w, u, true);
+      if (b != nullptr) (*b)(u) = rhs;
+      int k = outer[u];
+      for (const auto& e : w.row) {
+        inner[k] = e.first;
+        value[k] = e.second;
+        ++k;
+      }
+    }
+  });
 }
 
 /// Union-find with path halving; roots are the smallest index of their set so labels are deterministic.
@@ -149,10 +251,15 @@ void barycentric_gradients(const Points4& V, const TetIndices& T, Eigen::MatrixX
 }
 
 SparseMatrixD cotangent_stiffness(const Points4& V, const TetIndices& T) {
-  Eigen::MatrixXd G;
+  check_mesh_arrays(V, T, "cotangent_stiffness");
+  Eigen::Matrix<double, Eigen::Dynamic, 10, Eigen::RowMajor> L;
   Eigen::VectorXd vol;
-  barycentric_gradients(V, T, G, vol);
-  return assemble_stiffness(T, G, vol, V.rows());
+  local_stiffness(V, T, L, vol);
+  std::vector<int> all(static_cast<std::size_t>(V.rows()));
+  std::iota(all.begin(), all.end(), 0);
+  SparseMatrixD K;
+  assemble_rows(T, L, vol, all, int(V.rows()), nullptr, K, nullptr);
+  return K;
 }
 
 DirichletSystem dirichlet_system(const TetMesh4& mesh) {
@@ -171,11 +278,9 @@ DirichletSystem dirichlet_system(const TetMesh4& mesh) {
 
   DirichletSystem system;
   const auto assemble_start = Clock::now();
-  Eigen::MatrixXd G;
+  Eigen::Matrix<double, Eigen::Dynamic, 10, Eigen::RowMajor> L;
   Eigen::VectorXd vol;
-  barycentric_gradients(V, T, G, vol);
-  const SparseMatrixD K = assemble_stiffness(T, G, vol, n);
-  system.assemble_seconds = seconds_since(assemble_start);
+  local_stiffness(V, T, L, vol);
   system.degenerate_tets = (vol.array() <= 0.0).count();
 
   // Components through tets that carry stiffness only: a vertex held by degenerate tets alone would have
@@ -219,27 +324,14 @@ DirichletSystem dirichlet_system(const TetMesh4& mesh) {
     }
   }
 
-  // K_II in CSC, built column by column (the numbering is monotone so rows stay sorted), and the
-  // right-hand side -K_IB s_B read from the same columns because K is symmetric.
-  system.A.resize(unknowns, unknowns);
-  system.b = Eigen::VectorXd::Zero(unknowns);
+  // A = K_II and b = -K_IB s_B, assembled directly: K itself is never formed.
   system.x0.resize(unknowns);
-  system.A.reserve(K.nonZeros());
   for (Eigen::Index j = 0; j < n; ++j) {
     const int uj = system.unknown[static_cast<std::size_t>(j)];
-    if (uj < 0) continue;
-    system.A.startVec(uj);
-    for (SparseMatrixD::InnerIterator it(K, j); it; ++it) {
-      const int ui = system.unknown[static_cast<std::size_t>(it.row())];
-      if (ui >= 0) {
-        system.A.insertBack(ui, uj) = it.value();
-      } else {
-        system.b(uj) -= it.value() * system.s(it.row());
-      }
-    }
-    system.x0(uj) = mesh.time_of(j);
+    if (uj >= 0) system.x0(uj) = mesh.time_of(j);
   }
-  system.A.finalize();
+  assemble_rows(T, L, vol, system.unknown, unknowns, &system.s, system.A, &system.b);
+  system.assemble_seconds = seconds_since(assemble_start);
   return system;
 }
 

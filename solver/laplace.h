@@ -27,30 +27,30 @@ void barycentric_gradients(const Points4& V, const TetIndices& T, Eigen::MatrixX
 
 /// P1 stiffness matrix K = sum over tets of vol * G_t^T G_t (#V by #V, symmetric positive semidefinite,
 /// rows sum to zero). Off-diagonals equal -(1/6) l_kl cot(theta_kl) summed over tets of edge ij.
-/// Assembly is TBB-parallel over fixed chunks of tets, each writing its own slice of one triplet buffer in
-/// chunk order, so K is bitwise the same for any thread count.
+/// Assembly is TBB-parallel over rows, each row summed in incident-tet order straight into compressed
+/// storage, so K is bitwise the same for any thread count.
 SparseMatrixD cotangent_stiffness(const Points4& V, const TetIndices& T);
 
 struct LaplaceOptions {
-  std::string solver = "cg";       ///< backend name for make_solver. cg was the fastest on every morph system of
-                                   ///< bench/bench_solve.cpp (0.2M-1.7M tets, to residual 1e-8): 4-14x faster than
-                                   ///< cholmod, 66-370x than ldlt, 3-7x than gauss-seidel to its threshold 1e-5
-  SolveOptions solve;              ///< tolerance, iteration limit and (gauss-seidel) change threshold
-  bool warm_start = true;          ///< iterative backends (cg, cg-ic, gauss-seidel, auto) start from s = t instead of 0
+  std::string solver = "cg";  ///< backend name for make_solver. cg was the fastest on every morph system of
+                              ///< bench/bench_solve.cpp (0.2M-1.7M tets, to residual 1e-8): 4-14x faster than
+                              ///< cholmod, 66-370x than ldlt, 3-7x than gauss-seidel to its threshold 1e-5
+  SolveOptions solve;         ///< tolerance, iteration limit and (gauss-seidel) change threshold
+  bool warm_start = true;     ///< iterative backends (cg, cg-ic, gauss-seidel, auto) start from s = t instead of 0
 };
 
 /// The Dirichlet problem of solve_harmonic as one linear system A x = b over the unknowns: the interior vertices
 /// of components that touch A or B, numbered in vertex order. A = K_II (SPD), b = -K_IB s_B.
 struct DirichletSystem {
-  SparseMatrixD A;                        ///< #unknowns by #unknowns, both triangles stored
-  Eigen::VectorXd b;                      ///< #unknowns
-  Eigen::VectorXd x0;                     ///< #unknowns: morph time t of each unknown, the warm start s = t
-  Eigen::VectorXd s;                      ///< #V: 0 on A, 1 on B, floating components' mean t; 0 at unknowns
-  std::vector<int> unknown;               ///< #V: the vertex's unknown, or -1 for a fixed vertex
-  std::int64_t floating_components = 0;   ///< see LaplaceResult
+  SparseMatrixD A;                       ///< #unknowns by #unknowns, both triangles stored
+  Eigen::VectorXd b;                     ///< #unknowns
+  Eigen::VectorXd x0;                    ///< #unknowns: morph time t of each unknown, the warm start s = t
+  Eigen::VectorXd s;                     ///< #V: 0 on A, 1 on B, floating components' mean t; 0 at unknowns
+  std::vector<int> unknown;              ///< #V: the vertex's unknown, or -1 for a fixed vertex
+  std::int64_t floating_components = 0;  ///< see LaplaceResult
   std::int64_t floating_vertices = 0;
   std::int64_t degenerate_tets = 0;
-  double assemble_seconds = 0.0;          ///< gradients and stiffness matrix
+  double assemble_seconds = 0.0;  ///< local stiffness, components, A and b
 };
 
 /// Assembles the system solve_harmonic solves (it calls this), for benchmarks and external solvers.
@@ -58,14 +58,14 @@ struct DirichletSystem {
 DirichletSystem dirichlet_system(const TetMesh4& mesh);
 
 struct LaplaceResult {
-  Eigen::VectorXd s;                 ///< #V harmonic field, 0 on A, 1 on B
-  SolveReport report;                ///< backend diagnostics
-  std::int64_t unknowns = 0;         ///< interior vertices solved for
-  std::int64_t floating_components = 0;   ///< components touching neither A nor B: s set to their mean t
+  Eigen::VectorXd s;                     ///< #V harmonic field, 0 on A, 1 on B
+  SolveReport report;                    ///< backend diagnostics
+  std::int64_t unknowns = 0;             ///< interior vertices solved for
+  std::int64_t floating_components = 0;  ///< components touching neither A nor B: s set to their mean t
   std::int64_t floating_vertices = 0;
   std::int64_t degenerate_tets = 0;  ///< zero-volume tets left out of the operator (see tet_frame)
   double assemble_seconds = 0.0;
-  double seconds = 0.0;              ///< whole stage
+  double seconds = 0.0;  ///< whole stage
 };
 
 /// Solves the Dirichlet problem. Components with no boundary vertex would make the system singular:
