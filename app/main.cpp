@@ -1,4 +1,4 @@
-// The `morphmap` command: map, demo.
+// The `morphmap` command: map, demo, stretch, batch.
 #include <unistd.h>
 
 #include <CLI/CLI.hpp>
@@ -6,52 +6,13 @@
 #include <iostream>
 #include <sstream>
 
+#include "app/batch.h"
+#include "app/cli_options.h"
 #include "app/pipeline.h"
 #include "mesh/errors.h"
 #include "solver/linear_solver.h"
 
-namespace {
-
 using morphmap::PipelineOptions;
-
-// Options shared by `map` and `demo`.
-void add_pipeline_options(CLI::App& cmd, PipelineOptions& o) {
-  cmd.add_option("--voxels", o.morph.voxels, "Lattice voxels across the larger side of the union bounding box")
-      ->check(CLI::Range(4, 4096))
-      ->capture_default_str();
-  cmd.add_option("--voxel-size", o.morph.voxel_size, "Explicit voxel size (overrides --voxels)")
-      ->check(CLI::NonNegativeNumber);
-  cmd.add_option("--time-steps", o.extract.time_steps, "Lattice intervals along the morph time t")
-      ->check(CLI::Range(1, 4096))
-      ->capture_default_str();
-  cmd.add_option("--time-scale", o.extract.time_scale,
-                 "Length of one unit of morph time in R^4 (c); 0 = time-steps x voxel size (cubic cells)")
-      ->check(CLI::NonNegativeNumber)
-      ->capture_default_str();
-  const auto names = morphmap::solver_names();
-  cmd.add_option("--solver", o.laplace.solver, "Laplace solver backend")
-      ->check(CLI::IsMember(names))
-      ->capture_default_str();
-  cmd.add_option("--tolerance", o.laplace.solve.tolerance, "Relative residual at which iterative solvers stop")
-      ->check(CLI::PositiveNumber)
-      ->capture_default_str();
-  cmd.add_option("--max-iterations", o.laplace.solve.max_iterations, "Iteration limit of iterative solvers")
-      ->check(CLI::PositiveNumber)
-      ->capture_default_str();
-  cmd.add_option("--slices", o.slices, "Morph times in (0,1) at which to write slice_<t>.obj")->delimiter(',');
-  cmd.add_option("--align", o.align,
-                 "none: meshes in their own coordinates; bbox: both normalised, outputs in the target's")
-      ->check(CLI::IsMember({"none", "bbox"}))
-      ->capture_default_str();
-  cmd.add_flag("--ply", o.write_ply, "Also write target.ply");
-  cmd.add_option("--threads", o.threads, "Worker threads (0 = all cores)")->check(CLI::NonNegativeNumber);
-  cmd.add_option_function<std::string>(
-         "--max-memory", [&o](const std::string& text) { o.max_memory_bytes = morphmap::parse_memory_size(text); },
-         "Refuse a run whose estimated peak memory exceeds SIZE (e.g. 8G, 512M)")
-      ->type_name("SIZE");
-}
-
-}  // namespace
 
 int main(int argc, char** argv) {
   CLI::App app{"morphmap: dense correspondence and texture transfer through a 4D implicit morph"};
@@ -64,18 +25,26 @@ int main(int argc, char** argv) {
       ->required();
   map->add_option("TARGET", options.target, "Mesh file or built-in shape")->required();
   map->add_option("-o,--output", options.output_dir, "Output directory")->required();
-  add_pipeline_options(*map, options);
+  morphmap::add_pipeline_options(*map, options);
+  map->add_flag("--progress", options.progress, "Print stage times to stderr also when it is not a terminal");
 
   CLI::App* demo = app.add_subcommand("demo", "Map the built-in textured sphere onto the built-in torus");
   std::string demo_dir = "morphmap-demo";
   demo->add_option("-o,--output", demo_dir, "Output directory")->capture_default_str();
-  add_pipeline_options(*demo, options);
+  morphmap::add_pipeline_options(*demo, options);
 
   CLI::App* stretch = app.add_subcommand("stretch", "Print the texture stretch (JSON) of a map written by `map`");
   std::string stretch_target, stretch_labels, stretch_source;
   stretch->add_option("TARGET", stretch_target, "The mapped surface (target.obj)")->required();
   stretch->add_option("--labels", stretch_labels, "labels.txt: one preimage per vertex of TARGET")->required();
   stretch->add_option("--source", stretch_source, "The source surface (file or built-in shape)")->required();
+
+  CLI::App* batch = app.add_subcommand("batch", "Run the map jobs of a JSON manifest one after another (see README)");
+  morphmap::BatchOptions batch_options;
+  batch->add_option("MANIFEST", batch_options.manifest, "JSON manifest: {\"jobs\": [{\"source\", \"target\", map options}]}")
+      ->required();
+  batch->add_option("-o,--output", batch_options.output_dir, "Output directory: one folder per job, summary.csv/.md")
+      ->required();
 
   try {
     app.parse(argc, argv);
@@ -99,6 +68,12 @@ int main(int argc, char** argv) {
   }
 
   try {
+    if (batch->parsed()) {
+      batch_options.progress = isatty(fileno(stderr)) != 0;
+      const morphmap::BatchResult result = morphmap::run_batch(batch_options);
+      if (result.interrupted) return 130;
+      return result.failed > 0 ? 1 : 0;
+    }
     if (stretch->parsed()) {
       std::cout << morphmap::stretch_json(morphmap::stretch_of_files(stretch_target, stretch_labels, stretch_source))
                 << '\n';

@@ -16,6 +16,7 @@
 #include <optional>
 #include <sstream>
 
+#include "app/solver_compare.h"
 #include "io/image.h"
 #include "io/mesh_io.h"
 #include "io/output_dir.h"
@@ -170,6 +171,7 @@ PipelineResult run_pipeline(const PipelineOptions& options) {
   for (double t : options.slices)
     if (!(t > 0.0 && t < 1.0)) throw InvalidInput("--slices: time " + format_time(t) + " is not in (0, 1)");
   (void)make_solver(options.laplace.solver, options.laplace.solve);  // rejects an unknown backend before any work
+  for (const std::string& name : options.compare_solvers) (void)make_solver(name, options.laplace.solve);
 
   Progress progress(options.progress);
   nlohmann::json report;
@@ -211,6 +213,13 @@ PipelineResult run_pipeline(const PipelineOptions& options) {
   const LaplaceResult laplace = solve_harmonic(mesh, options.laplace);
   seconds["laplace"] = laplace.seconds;
   progress.stage("laplace", laplace.seconds);
+
+  const SolverComparisonResult comparison =
+      compare_solvers(mesh, laplace.s, options.compare_solvers, options.laplace);
+  if (!options.compare_solvers.empty()) {
+    seconds["compare"] = comparison.seconds;
+    progress.stage("compare", comparison.seconds);
+  }
 
   const GradientResult gradient = compute_gradient(mesh, laplace.s);
   seconds["gradient"] = gradient.seconds;
@@ -265,6 +274,7 @@ PipelineResult run_pipeline(const PipelineOptions& options) {
                        {"time_scale", mesh.time_scale},
                        {"zero_snap", options.extract.zero_snap},
                        {"solver", options.laplace.solver},
+                       {"compare_solvers", options.compare_solvers},
                        {"tolerance", options.laplace.solve.tolerance},
                        {"max_iterations", options.laplace.solve.max_iterations},
                        {"warm_start", options.laplace.warm_start},
@@ -315,6 +325,19 @@ PipelineResult run_pipeline(const PipelineOptions& options) {
                       {"floating_components", laplace.floating_components},
                       {"floating_vertices", laplace.floating_vertices},
                       {"degenerate_tets", laplace.degenerate_tets}};
+  if (!options.compare_solvers.empty()) {
+    nlohmann::json solves = nlohmann::json::array();
+    for (const SolverComparison& c : comparison.solves)
+      solves.push_back({{"name", c.backend},
+                        {"iterations", c.iterations},
+                        {"residual", c.residual},
+                        {"change", c.change},
+                        {"setup_seconds", c.setup_seconds},
+                        {"solve_seconds", c.solve_seconds},
+                        {"memory_bytes", c.memory_bytes},
+                        {"max_difference", c.max_difference}});
+    report["compare"] = {{"assemble_seconds", comparison.assemble_seconds}, {"solves", solves}};
+  }
   report["transport"] = {{"fallbacks", transport.fallbacks()},
                          {"upwind_exact", transport.upwind_exact},
                          {"fallback_projected", transport.fallback_projected},

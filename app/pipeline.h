@@ -22,6 +22,8 @@ struct PipelineOptions {
   MorphOptions morph;              ///< lattice resolution
   ExtractOptions extract;          ///< time steps, time scale
   LaplaceOptions laplace;          ///< solver backend and tolerance
+  std::vector<std::string> compare_solvers;  ///< backends also run on the same system, reported under "compare"
+                                             ///< in report.json (the map uses laplace.solver only)
   TransportOptions transport;      ///< upwind sweep tolerances
   std::vector<double> slices;      ///< morph times in (0, 1) at which to write slice_<t>.obj
   bool write_ply = false;          ///< also write target.ply

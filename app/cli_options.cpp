@@ -1,0 +1,48 @@
+// Options of a pipeline run on the command line (see app/cli_options.h).
+#include "app/cli_options.h"
+
+#include "solver/linear_solver.h"
+
+namespace morphmap {
+
+void add_pipeline_options(CLI::App& cmd, PipelineOptions& o) {
+  cmd.add_option("--voxels", o.morph.voxels, "Lattice voxels across the larger side of the union bounding box")
+      ->check(CLI::Range(4, 4096))
+      ->capture_default_str();
+  cmd.add_option("--voxel-size", o.morph.voxel_size, "Explicit voxel size (overrides --voxels)")
+      ->check(CLI::NonNegativeNumber);
+  cmd.add_option("--time-steps", o.extract.time_steps, "Lattice intervals along the morph time t")
+      ->check(CLI::Range(1, 4096))
+      ->capture_default_str();
+  cmd.add_option("--time-scale", o.extract.time_scale,
+                 "Length of one unit of morph time in R^4 (c); 0 = time-steps x voxel size (cubic cells)")
+      ->check(CLI::NonNegativeNumber)
+      ->capture_default_str();
+  const auto names = solver_names();
+  cmd.add_option("--solver", o.laplace.solver, "Laplace solver backend")
+      ->check(CLI::IsMember(names))
+      ->capture_default_str();
+  cmd.add_option("--tolerance", o.laplace.solve.tolerance, "Relative residual at which iterative solvers stop")
+      ->check(CLI::PositiveNumber)
+      ->capture_default_str();
+  cmd.add_option("--max-iterations", o.laplace.solve.max_iterations, "Iteration limit of iterative solvers")
+      ->check(CLI::PositiveNumber)
+      ->capture_default_str();
+  cmd.add_option("--slices", o.slices, "Morph times in (0,1) at which to write slice_<t>.obj")->delimiter(',');
+  cmd.add_option("--align", o.align,
+                 "none: meshes in their own coordinates; bbox: both normalised, outputs in the target's")
+      ->check(CLI::IsMember({"none", "bbox"}))
+      ->capture_default_str();
+  cmd.add_option("--compare-solvers", o.compare_solvers,
+                 "Also solve the same system with these backends and report each (Table II's diffusion column)")
+      ->check(CLI::IsMember(names))
+      ->delimiter(',');
+  cmd.add_flag("--ply", o.write_ply, "Also write target.ply");
+  cmd.add_option("--threads", o.threads, "Worker threads (0 = all cores)")->check(CLI::NonNegativeNumber);
+  cmd.add_option_function<std::string>(
+         "--max-memory", [&o](const std::string& text) { o.max_memory_bytes = parse_memory_size(text); },
+         "Refuse a run whose estimated peak memory exceeds SIZE (e.g. 8G, 512M)")
+      ->type_name("SIZE");
+}
+
+}  // namespace morphmap
