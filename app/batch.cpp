@@ -124,6 +124,7 @@ const std::vector<std::string> kColumns = {"job",
                                            "solve_residual",
                                            "label_passes",
                                            "label_seconds",
+                                           "map_seconds",
                                            "total_seconds",
                                            "peak_memory_bytes",
                                            "error"};
@@ -142,6 +143,7 @@ std::vector<std::string> cells(const SummaryRow& r) {
           number(r.solve_residual, 3),
           integer(r.label_passes),
           number(r.label_seconds, 4),
+          number(r.map_seconds, 4),
           number(r.total_seconds, 4),
           integer(r.peak_memory_bytes),
           r.error};
@@ -417,7 +419,7 @@ std::vector<BatchJob> parse_manifest(const std::string& text, const std::string&
         throw InvalidInput(where + ": unknown key '" + key + "'" +
                            (key == "output" || key == "o" ? " (the batch names each job's folder)" : ""));
       const std::string flag = "--" + key, what = where + ": '" + key + "'";
-      if (option->get_type_size_max() == 0) {  // a flag
+      if (option->get_expected_max() == 0) {  // a flag
         if (!item.value().is_boolean()) throw InvalidInput(what + " is a flag: true or false");
         if (item.value().get<bool>()) job.args.push_back(flag);
       } else if (item.value().is_array()) {
@@ -485,6 +487,8 @@ SummaryRow summary_row(const std::string& job, const std::string& report_json) {
   row.label_seconds = optional_at<double>(r, "/seconds/transport"_json_pointer);
   row.total_seconds = optional_at<double>(r, "/seconds/total"_json_pointer);
   row.peak_memory_bytes = optional_at<std::int64_t>(r, "/peak_memory_bytes"_json_pointer);
+  if (row.total_seconds)
+    row.map_seconds = *row.total_seconds - optional_at<double>(r, "/seconds/compare"_json_pointer).value_or(0.0);
   return row;
 }
 
@@ -503,12 +507,12 @@ std::string summary_csv(const std::vector<SummaryRow>& rows) {
 std::string summary_markdown(const std::vector<SummaryRow>& rows) {
   std::string text =
       "| job | status | tets | time steps | diffusion iters | diffusion s | diffusion conv | solver | solve iters | "
-      "solve s | solve residual | label passes | label s | total s | peak memory | error |\n"
-      "|---|---|--:|--:|--:|--:|--:|---|--:|--:|--:|--:|--:|--:|--:|---|\n";
+      "solve s | solve residual | label passes | label s | map s | total s | peak memory | error |\n"
+      "|---|---|--:|--:|--:|--:|--:|---|--:|--:|--:|--:|--:|--:|--:|--:|---|\n";
   for (const SummaryRow& row : rows) {
     std::vector<std::string> values = cells(row);
     if (row.peak_memory_bytes)
-      values[14] = number(double(*row.peak_memory_bytes) / (1024.0 * 1024.0 * 1024.0), 3) + " GiB";
+      values[15] = number(double(*row.peak_memory_bytes) / (1024.0 * 1024.0 * 1024.0), 3) + " GiB";
     text += "|";
     for (const std::string& v : values) text += " " + md_cell(v) + " |";
     text += '\n';
@@ -572,15 +576,18 @@ BatchResult run_batch(const BatchOptions& options) {
           status.show(label + ": " + stage + "  " + seconds_text(seconds) + "  (batch " +
                       seconds_text(seconds_since(batch_start)) + ")");
         });
-    if (run.stopped) {
+    // report.json was removed before the start, so if it is there this run wrote it, and wrote it last: the job is
+    // complete even if a stop request killed `map` on its way out.
+    std::error_code missing;
+    const bool complete = fs::is_regular_file(dir / "report.json", missing);
+    if (run.stopped && !complete) {
       row.status = "interrupted";
       result.interrupted = true;
       status.finish(label + ": interrupted");
       write_summary(options.output_dir, result.rows);
       break;
     }
-    std::error_code missing;
-    if (run.exit_code == 0 && fs::is_regular_file(dir / "report.json", missing)) {
+    if (complete) {
       row = summary_row(job.name, read_file((dir / "report.json").string()));
       ++result.succeeded;
       status.finish(label + ": ok  " + seconds_text(run.seconds));

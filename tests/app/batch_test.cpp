@@ -209,7 +209,7 @@ TEST_F(Batch, SummaryRowTakesDiffusionAndSolveFromEitherSide) {
            {"setup_seconds", 0.0},
            {"solve_seconds", 7.0}}}}}},
       {"transport", {{"wavefronts", 88}}},
-      {"seconds", {{"transport", 0.25}, {"total", 12.0}}},
+      {"seconds", {{"transport", 0.25}, {"compare", 7.5}, {"total", 12.0}}},
       {"peak_memory_bytes", 1 << 30}};
   SummaryRow row = summary_row("t", report.dump());
   EXPECT_EQ(row.status, "ok");
@@ -223,6 +223,7 @@ TEST_F(Batch, SummaryRowTakesDiffusionAndSolveFromEitherSide) {
   EXPECT_DOUBLE_EQ(*row.solve_seconds, 2.0);
   EXPECT_EQ(*row.label_passes, 88);
   EXPECT_DOUBLE_EQ(*row.total_seconds, 12.0);
+  EXPECT_DOUBLE_EQ(*row.map_seconds, 4.5);
   // The map solved by Gauss-Seidel and compared with CHOLMOD: the columns swap sources.
   report["solver"]["name"] = "gauss-seidel";
   report["compare"]["solves"][0]["name"] = "cholmod";
@@ -317,10 +318,10 @@ TEST_F(Batch, RerunSkipsCompleteJobsAndRedoesChangedOnes) {
 class BatchKilled : public Batch, public ::testing::WithParamInterface<int> {};
 
 TEST_P(BatchKilled, RerunFinishesTheRemainingJobs) {
-  // Job "slow" takes long enough (about a second) for the kill to land inside it.
+  // Job "slow" takes long enough (half a second or more) for the kill to land inside it.
   const std::string manifest = std::string("{\"jobs\": [{\"name\": \"first\", ") + kTiny +
-                               "}, {\"name\": \"slow\", \"source\": \"sphere\", \"target\": \"torus\", \"voxels\": 30, "
-                               "\"time-steps\": 6}, {\"name\": \"last\", " +
+                               "}, {\"name\": \"slow\", \"source\": \"sphere\", \"target\": \"torus\", \"voxels\": 14, "
+                               "\"time-steps\": 4}, {\"name\": \"last\", " +
                                kTiny + "}]}";
   const fs::path m = write("m.json", manifest);
   const fs::path reference = dir_ / "reference", out = dir_ / "out";
