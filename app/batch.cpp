@@ -610,6 +610,10 @@ BatchResult run_batch(const BatchOptions& options) {
   }
   if (stop_requested) result.interrupted = true;
   write_summary(options.output_dir, result.rows);
+  status.finish("[batch] " + std::to_string(result.succeeded) + " of " + n + " jobs ok (" +
+                std::to_string(result.skipped) + " complete before), " + std::to_string(result.failed) + " failed" +
+                (result.interrupted ? ", interrupted" : "") + "; " + seconds_text(seconds_since(batch_start)) +
+                "; summary in " + (fs::path(options.output_dir) / "summary.md").string());
   return result;
 }
 
