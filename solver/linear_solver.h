@@ -19,6 +19,7 @@ struct SolveOptions {
                                    ///< estimates each candidate's time to reach it
   int max_iterations = 20000;      ///< cg, cg-ic give up (SolverError) after this many iterations; gauss-seidel
                                    ///< stops (without error) after this many sweeps
+  int coarsening = 64;             ///< cg-agg: the coarse space has at most #unknowns / coarsening unknowns
   double change_threshold = 1e-5;  ///< gauss-seidel stops once the mean |change| of s per unknown in one sweep is
                                    ///< below this (the paper's convergence measure; 1e-5 is Table II's value)
 };

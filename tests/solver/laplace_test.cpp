@@ -394,7 +394,7 @@ TEST(LaplaceHarmonicCompare, RejectsBadInput) {
     solve_harmonic(mesh, options);
     FAIL() << "expected InvalidInput";
   } catch (const InvalidInput& e) {
-    EXPECT_STREQ(e.what(), "unknown solver 'lu' (choose cholmod, cg, cg-ic, gauss-seidel, ldlt, auto)");
+    EXPECT_STREQ(e.what(), "unknown solver 'lu' (choose cholmod, cg, cg-ic, cg-agg, gauss-seidel, ldlt, auto)");
   }
   options.solver = "cholmod";
   mesh.side.pop_back();
