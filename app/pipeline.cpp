@@ -135,6 +135,39 @@ std::string stretch_json(const StretchResult& r) {
   return j.dump(2);
 }
 
+namespace {
+
+// The seams section of report.json (also per slice).
+nlohmann::json seams_json(const SeamResult& r, const SeamOptions& o) {
+  return {{"threshold", r.threshold},
+          {"threshold_diagonals", o.label_threshold},
+          {"threshold_rule",
+           "a source tet spans a topological seam when two of its labels are farther apart than threshold_diagonals "
+           "times A's bounding-box diagonal; label_span_histogram shows the gap between ordinary and seam triangles"},
+          {"label_span_bin_edges_diagonals", r.span_bin_edges},
+          {"label_span_histogram", r.span_histogram},
+          {"seam_tets", r.seam_tets},
+          {"topological_split", r.topological_split},
+          {"topological_seam_curves", r.topological_seam_curves},
+          {"topological_seam_vertices", r.topological_seam_points.rows()},
+          {"spans_over_threshold", r.spans_over_threshold},
+          {"texture_split", r.texture_split},
+          {"texture_crossings", r.texture_crossings},
+          {"texture_fan_splits", r.texture_fan_splits},
+          {"texture_seam_curves", r.texture_seam_curves},
+          {"unresolved_edges", r.unresolved_edges},
+          {"uv_area_excess", r.uv_area_excess},
+          {"uv_area_excess_unsplit", r.uv_area_excess_unsplit},
+          {"uv_area_tolerance", o.uv_area_tolerance},
+          {"max_uv_area_ratio", r.max_uv_area_ratio},
+          {"mean_preimage_uv_area", r.mean_preimage_uv_area},
+          {"triangles", r.F.rows()},
+          {"vertices", r.V.rows()},
+          {"seconds", r.seconds}};
+}
+
+}  // namespace
+
 StretchResult stretch_of_files(const std::string& target, const std::string& labels, const std::string& source) {
   const Surface B = read_surface(target);
   validate_surface(B, false);
@@ -249,15 +282,24 @@ PipelineResult run_pipeline(const PipelineOptions& options) {
     double t;
     SliceMesh mesh;
     Eigen::MatrixXd uv;
+    SeamResult seams;
   };
   std::vector<SliceOut> slices;
   for (double t : options.slices) {
-    SliceOut s{t, slice_at(mesh, transport.labels, t), {}};
+    SliceOut s{t, slice_at(mesh, transport.labels, t), {}, {}};
     if (A.has_uv()) s.uv = uv_at(A, locator.closest_all(s.mesh.labels));
     slices.push_back(std::move(s));
   }
   seconds["transfer"] = seconds_since(start);
   progress.stage("transfer", seconds["transfer"]);
+
+  // Seams (§8): target.obj and the slices are written from the split meshes.
+  start = Clock::now();
+  result.target_seams = split_seams(result.target, mesh, transport.labels, A, locator, options.seams);
+  for (SliceOut& s : slices) s.seams = split_seams(s.mesh, mesh, transport.labels, A, locator, options.seams);
+  const Eigen::MatrixXd seam_preimages = frame_a.to_world(points_of(locator.closest_all(result.target_seams.labels)));
+  seconds["seams"] = seconds_since(start);
+  progress.stage("seams", seconds["seams"]);
 
   result.target_labels = frame_a.to_world(points_of(hits));
   result.target.V = frame_b.to_world(result.target.V);
@@ -285,8 +327,10 @@ PipelineResult run_pipeline(const PipelineOptions& options) {
                        {"output_dir", options.output_dir}};
   report["counts"] = {{"vertices", mesh.vertex_count()},
                       {"tets", mesh.tet_count()},
-                      {"target_vertices", result.target.V.rows()},
-                      {"target_triangles", result.target.F.rows()},
+                      {"target_vertices", result.target_seams.V.rows()},
+                      {"target_triangles", result.target_seams.F.rows()},
+                      {"extracted_target_vertices", result.target.V.rows()},
+                      {"extracted_target_triangles", result.target.F.rows()},
                       {"source_vertices", A.V.rows()},
                       {"source_triangles", A.F.rows()},
                       {"lattice_points", morph.lattice_points},
@@ -312,6 +356,7 @@ PipelineResult run_pipeline(const PipelineOptions& options) {
       {"min_volume_ratio", quality.min_volume_ratio},
       {"dihedral_histogram_10deg", quality.dihedral_histogram}};
   report["stretch"] = nlohmann::json::parse(stretch_json(stretch));
+  report["seams"] = seams_json(result.target_seams, options.seams);
   report["solver"] = {{"name", laplace.report.backend},
                       {"iterations", laplace.report.iterations},
                       {"residual", laplace.report.residual},
@@ -366,10 +411,11 @@ PipelineResult run_pipeline(const PipelineOptions& options) {
       mtl_name = "target.mtl";
       write_mtl(out->staged(mtl_name), texture_name);
     }
-    const TriIndices no_fuv;
-    write_obj(out->staged("target.obj"), target_positions, result.target.F, result.target_uv, no_fuv, mtl_name);
+    // target.obj is the seam-split B with per-corner UVs; target.ply keeps the extracted B with per-vertex UVs.
+    write_obj(out->staged("target.obj"), frame_b.to_world(result.target_seams.V), result.target_seams.F,
+              result.target_seams.UV, result.target_seams.FUV, mtl_name);
     if (options.write_ply) write_ply(out->staged("target.ply"), target_positions, result.target.F, result.target_uv);
-    write_labels(out->staged("labels.txt"), result.target_labels);
+    write_labels(out->staged("labels.txt"), seam_preimages);
     nlohmann::json slice_report = nlohmann::json::array();
     for (const SliceOut& s : slices) {
       // Intermediate shapes live between A's and B's frames; interpolate the similarity.
@@ -377,8 +423,12 @@ PipelineResult run_pipeline(const PipelineOptions& options) {
       frame.center = (1.0 - s.t) * frame_a.center + s.t * frame_b.center;
       frame.scale = (1.0 - s.t) * frame_a.scale + s.t * frame_b.scale;
       const std::string name = "slice_" + format_time(s.t) + ".obj";
-      write_obj(out->staged(name), frame.to_world(s.mesh.V), s.mesh.F, s.uv, no_fuv, mtl_name);
-      slice_report.push_back({{"t", s.t}, {"file", name}, {"vertices", s.mesh.V.rows()}, {"triangles", s.mesh.F.rows()}});
+      write_obj(out->staged(name), frame.to_world(s.seams.V), s.seams.F, s.seams.UV, s.seams.FUV, mtl_name);
+      slice_report.push_back({{"t", s.t},
+                              {"file", name},
+                              {"vertices", s.seams.V.rows()},
+                              {"triangles", s.seams.F.rows()},
+                              {"seams", seams_json(s.seams, options.seams)}});
     }
     report["slices"] = slice_report;
   }

@@ -8,6 +8,7 @@
 #include "mesh/extract.h"
 #include "mesh/metrics.h"
 #include "mesh/morph.h"
+#include "mesh/seams.h"
 #include "mesh/slice.h"
 #include "solver/laplace.h"
 #include "solver/transport.h"
@@ -25,6 +26,7 @@ struct PipelineOptions {
   std::vector<std::string> compare_solvers;  ///< backends also run on the same system, reported under "compare"
                                              ///< in report.json (the map uses laplace.solver only)
   TransportOptions transport;      ///< upwind sweep tolerances
+  SeamOptions seams;               ///< topological and texture seam splitting of target.obj and slices (§8)
   std::vector<double> slices;      ///< morph times in (0, 1) at which to write slice_<t>.obj
   bool write_ply = false;          ///< also write target.ply
   int threads = 0;                 ///< worker threads; 0 = all cores
@@ -37,6 +39,7 @@ struct PipelineResult {
   SliceMesh target;                 ///< B as extracted (t = 1 boundary): V in B's coordinates, labels raw (morph frame)
   Eigen::MatrixXd target_labels;    ///< #target.V by 3: preimage on A (closest point of A to the raw label), A's coordinates
   Eigen::MatrixXd target_uv;        ///< #target.V by 2 texture coordinates; empty when A has no UVs
+  SeamResult target_seams;          ///< B split along seams (what target.obj holds), V and labels in the morph frame
   std::int64_t mesh_vertices = 0;   ///< vertices of the 4D tet mesh
   std::int64_t mesh_tets = 0;
   std::int64_t fallbacks = 0;       ///< transport fallbacks

@@ -1,0 +1,80 @@
+// Topological seams (paper §8.1) and texture seams (§8.2): triangles of B and of every slice whose
+// labels straddle a seam are split, so that no output triangle interpolates labels or texture
+// coordinates across one.
+//
+// Topological: a triangle whose source tet's labels fall into clusters far apart in label space is cut
+// by the tet's critical plane, the plane through the midpoints of the tet edges that join different
+// clusters (the level set 1/2 of the cluster indicator interpolated over the tet). Each piece takes labels
+// only from its own cluster's tet vertices. Vertices on the cut are duplicated, one per side, so every
+// output vertex carries one label.
+// Texture: the label path along every edge is followed on A (closest point, bisection) to find where it
+// crosses a seam edge of A's atlas (an edge whose two faces disagree on both shared corners' UVs) or a
+// jump of the closest-point map; triangles with crossings are split there, and every output corner takes
+// its UV from the A face on its own side. Texture seam vertices are shared; only their UVs (per corner) differ.
+#pragma once
+
+#include <Eigen/Core>
+#include <array>
+#include <cstdint>
+#include <vector>
+
+#include "mesh/slice.h"
+#include "mesh/surface.h"
+#include "mesh/tet_mesh4.h"
+#include "mesh/transfer.h"
+
+namespace morphmap {
+
+struct SeamOptions {
+  /// A tet (and its triangles) spans a topological seam when two of its vertices' labels are farther apart
+  /// than this, in units of the diagonal of A's bounding box. Measured (report.json label_span_histogram):
+  /// ordinary triangles span < 0.06 diagonals (a few voxels), seam triangles span 0.4-1.0 (opposite sides of A).
+  double label_threshold = 0.25;
+  bool topological = true;            ///< split along topological seams
+  bool texture = true;                ///< split along A's texture seams (needs A's UVs)
+  double crossing_tolerance = 1e-7;   ///< bisection along an edge stops at this fraction of the edge's label length
+  int max_queries_per_edge = 256;     ///< closest-point queries per edge before the edge is counted unresolved
+  /// A UV triangle may exceed its preimage's UV area by this fraction of it plus this fraction of the mean
+  /// triangle's preimage UV area (a triangle across a seam covers a strip of the atlas: tens of mean areas).
+  double uv_area_tolerance = 0.5;
+  double uv_area_epsilon = 1e-12;     ///< plus this absolute UV area (rounding on tiny triangles)
+};
+
+struct SeamResult {
+  Eigen::MatrixXd V;              ///< #V by 3 positions (topological seam vertices appear once per side)
+  TriIndices F;                   ///< #F by 3, oriented like the input
+  Eigen::MatrixXd labels;         ///< #V by 3 raw labels (points near A in the morph frame)
+  Eigen::MatrixXd UV;             ///< #UV by 2 texture coordinates (empty without A's UVs)
+  TriIndices FUV;                 ///< #F by 3 indices into UV per corner (empty without A's UVs)
+  std::vector<int> source_face;   ///< #F: input triangle each output triangle comes from
+  Eigen::MatrixXd topological_seam_points;  ///< #S by 3: positions of the vertices on topological cuts
+
+  double threshold = 0.0;                   ///< absolute label-space threshold used
+  std::int64_t seam_tets = 0;               ///< input triangles whose source tet spans the threshold
+  std::int64_t topological_split = 0;       ///< of those, triangles cut in two or more pieces
+  std::int64_t topological_seam_curves = 0; ///< connected curves of cut edges (by position)
+  std::int64_t spans_over_threshold = 0;    ///< output triangles whose corner labels still span the threshold
+  std::int64_t texture_split = 0;           ///< triangles split at texture seams (or closest-point jumps)
+  std::int64_t texture_crossings = 0;       ///< edge crossings found
+  std::int64_t texture_fan_splits = 0;      ///< of the split triangles, those with other than two crossings (fanned)
+  std::int64_t texture_seam_curves = 0;     ///< connected curves of texture cut edges
+  std::int64_t unresolved_edges = 0;        ///< edges whose bisection ran out of queries
+  std::int64_t uv_area_excess = 0;          ///< output triangles whose UV area exceeds their preimage's (see options)
+  std::vector<int> uv_area_excess_faces;    ///< those triangles (indices into F)
+  std::int64_t uv_area_excess_unsplit = 0;  ///< the same count for the input triangles with per-vertex UVs
+  double max_uv_area_ratio = 0.0;           ///< largest UV area / (preimage UV area) over output triangles
+  double mean_preimage_uv_area = 0.0;       ///< mean preimage UV area of the output triangles (tolerance unit)
+  std::vector<double> span_bin_edges;       ///< label span histogram bin edges, in A diagonals (last bin open)
+  std::vector<std::int64_t> span_histogram; ///< input triangles per bin of max corner label distance
+  double seconds = 0.0;
+};
+
+/// Splits `slice` (target_boundary or slice_at of `mesh` with vertex labels `labels`, #mesh.V by 3) along
+/// topological seams and, when A has UVs, along A's texture seams. `locator` must be built on A.
+SeamResult split_seams(const SliceMesh& slice, const TetMesh4& mesh, const Eigen::MatrixXd& labels, const Surface& A,
+                       const SurfaceLocator& locator, const SeamOptions& options = {});
+
+/// Number of connected curves formed by edges (#E by 2 vertex ids).
+std::int64_t count_curves(const std::vector<std::array<int, 2>>& edges);
+
+}  // namespace morphmap

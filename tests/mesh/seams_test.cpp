@@ -1,0 +1,145 @@
+// Seams (paper §8): a hand-built tet straddling a label seam, and small analytic morphs through the
+// pipeline (sphere -> torus opens a hole, sphere -> two spheres splits, sphere -> sphere crosses the
+// longitude texture seam).
+#include "mesh/seams.h"
+
+#include <gtest/gtest.h>
+
+#include <cmath>
+#include <nlohmann/json.hpp>
+
+#include "app/pipeline.h"
+#include "mesh/shapes.h"
+
+namespace morphmap {
+namespace {
+
+Surface unit_sphere() {
+  ShapeSpec spec;
+  spec.kind = "sphere";
+  spec.resolution = 32;
+  return make_shape(spec, std::nullopt);
+}
+
+// One tet: three vertices on B (t = 1), one inside. Vertex 0 carries the north pole's label, the others
+// the south pole's, so B's only triangle straddles a topological seam.
+TEST(Seams, TriangleAcrossALabelSeamIsCutAndNoPieceSpansIt) {
+  TetMesh4 mesh;
+  mesh.V.resize(4, 4);
+  mesh.V << 0, 0, 0, 1,  //
+      1, 0, 0, 1,        //
+      0, 1, 0, 1,        //
+      0.3, 0.3, 0.5, 0;
+  mesh.T.resize(1, 4);
+  mesh.T << 0, 1, 2, 3;
+  mesh.side = {VertexSide::B, VertexSide::B, VertexSide::B, VertexSide::A};
+  mesh.time_steps = 1;
+  mesh.voxel_size = 1.0;
+  Eigen::MatrixXd labels(4, 3);
+  labels << 0, 0, 1,  //
+      0.05, 0, -1,    //
+      0, 0.05, -1,    //
+      0, 0, -1;
+  const Surface A = unit_sphere();
+  const SurfaceLocator locator(A);
+  const SliceMesh B = target_boundary(mesh, labels);
+  ASSERT_EQ(B.F.rows(), 1);
+  SeamOptions options;
+  options.texture = false;
+  const SeamResult r = split_seams(B, mesh, labels, A, locator, options);
+  EXPECT_EQ(r.seam_tets, 1);
+  EXPECT_EQ(r.topological_split, 1);
+  EXPECT_EQ(r.F.rows(), 3);  // a triangle and a quad
+  EXPECT_EQ(r.spans_over_threshold, 0);
+  // The cut runs through the midpoints of the two edges leaving vertex 0 (its critical plane meets B there),
+  // and both sides keep their own labels: the seam points appear once per side.
+  EXPECT_EQ(r.topological_seam_points.rows(), 2);
+  EXPECT_EQ(r.V.rows(), 7);
+  for (Eigen::Index v = 0; v < r.V.rows(); ++v) EXPECT_NEAR(std::abs(r.labels(v, 2)), 1.0, 1e-12) << v;
+  for (Eigen::Index i = 0; i < r.topological_seam_points.rows(); ++i) {
+    const Eigen::Vector3d p = r.topological_seam_points.row(i).transpose();
+    EXPECT_TRUE(p.isApprox(Eigen::Vector3d(0.5, 0, 0)) || p.isApprox(Eigen::Vector3d(0, 0.5, 0))) << p.transpose();
+  }
+  // Without seam handling the same triangle would stay whole and span the seam.
+  options.topological = false;
+  const SeamResult off = split_seams(B, mesh, labels, A, locator, options);
+  EXPECT_EQ(off.spans_over_threshold, 1);
+}
+
+PipelineOptions small(const std::string& source, const std::string& target) {
+  PipelineOptions o;
+  o.source = source;
+  o.target = target;
+  o.morph.voxels = 16;
+  o.extract.time_steps = 4;
+  return o;
+}
+
+TEST(Seams, SphereToTorusSeamLiesOnTheInnerRing) {
+  const PipelineResult r = run_pipeline(small("sphere", "torus"));
+  const nlohmann::json report = nlohmann::json::parse(r.report_json);
+  const nlohmann::json& seams = report["seams"];
+  EXPECT_GT(seams["topological_split"].get<std::int64_t>(), 0);
+  EXPECT_EQ(seams["spans_over_threshold"].get<std::int64_t>(), 0);
+  EXPECT_EQ(seams["topological_seam_curves"].get<std::int64_t>(), 1);
+  EXPECT_EQ(seams["uv_area_excess"].get<std::int64_t>(), 0);
+  EXPECT_GT(seams["uv_area_excess_unsplit"].get<std::int64_t>(), 0);
+  // Torus around z fitted to the sphere's box: R + r = half the x extent, r = half the z extent.
+  const Eigen::AlignedBox3d box = bounding_box(r.target.V);
+  const double h = report["options"]["voxel_size"].get<double>();
+  const double minor = 0.5 * box.sizes().z(), inner = 0.5 * box.sizes().x() - 2.0 * minor;
+  const Eigen::Vector3d c = box.center();
+  const Eigen::MatrixXd& P = r.target_seams.topological_seam_points;
+  ASSERT_GT(P.rows(), 8);
+  for (Eigen::Index i = 0; i < P.rows(); ++i) {
+    const Eigen::Vector3d d = P.row(i).transpose() - c;
+    const double ring = std::hypot(std::hypot(d.x(), d.y()) - inner, d.z());
+    EXPECT_LT(ring, h) << "seam vertex " << i << " at " << P.row(i);
+  }
+}
+
+TEST(Seams, SplittingSphereHasOneSeamPerNewSphere) {
+  const PipelineResult r = run_pipeline(small("sphere", "two-spheres"));
+  const SeamResult& s = r.target_seams;
+  EXPECT_EQ(s.topological_seam_curves, 2);
+  EXPECT_EQ(s.spans_over_threshold, 0);
+  EXPECT_EQ(s.uv_area_excess, 0);
+  // One curve on each sphere: seam points on both sides of the plane between them.
+  const Eigen::AlignedBox3d box = bounding_box(r.target.V);
+  Eigen::Index axis = 0;
+  box.sizes().maxCoeff(&axis);
+  int below = 0, above = 0;
+  for (Eigen::Index i = 0; i < s.topological_seam_points.rows(); ++i)
+    (s.topological_seam_points(i, axis) < box.center()(axis) ? below : above)++;
+  EXPECT_GT(below, 0);
+  EXPECT_GT(above, 0);
+}
+
+TEST(Seams, LongitudeTextureSeamIsSplit) {
+  // Same shape, different tessellation: B's triangles straddle A's longitude seam.
+  const PipelineResult r = run_pipeline(small("sphere:res=40", "sphere:res=40"));
+  const SeamResult& s = r.target_seams;
+  EXPECT_EQ(s.seam_tets, 0);
+  EXPECT_GT(s.texture_split, 0);
+  EXPECT_GT(s.uv_area_excess_unsplit, 0);
+  EXPECT_EQ(s.uv_area_excess, 0);
+  EXPECT_EQ(s.unresolved_edges, 0);
+  ASSERT_EQ(s.FUV.rows(), s.F.rows());
+  // Split triangles on the two sides of the seam take u near 0 and near 1 at the same position.
+  double low = 1.0, high = 0.0;
+  for (Eigen::Index i = 0; i < s.UV.rows(); ++i) {
+    low = std::min(low, s.UV(i, 0));
+    high = std::max(high, s.UV(i, 0));
+  }
+  EXPECT_LT(low, 0.01);
+  EXPECT_GT(high, 0.99);
+}
+
+TEST(Seams, CountCurves) {
+  EXPECT_EQ(count_curves({}), 0);
+  EXPECT_EQ(count_curves({{0, 1}, {1, 2}, {5, 6}}), 2);
+  EXPECT_EQ(count_curves({{0, 1}, {1, 2}, {2, 0}}), 1);
+}
+
+}  // namespace
+}  // namespace morphmap
