@@ -78,8 +78,9 @@ struct LabelledMesh {
   std::vector<Eigen::Vector3d> vertex_label;
   std::vector<std::array<int, 3>> faces;
   std::vector<int> source_face;
-  std::vector<std::array<int, 2>> cut_edges;  // position ids
-  std::vector<char> cut_position;             // per position: lies on a topological cut
+  std::vector<std::array<int, 2>> cut_edges;    // position ids
+  std::vector<char> cut_position;               // per position: lies on a topological cut
+  std::vector<std::array<int, 3>> split_faces;  // corners (input vertex ids) of the input triangles that were cut
 };
 
 // A vertex of a polygon being clipped: barycentric in the input triangle and whether a cut created it.
@@ -183,24 +184,41 @@ class TopologicalPass {
       q[std::size_t(i)] = mesh_.T(tet, i);
       L[std::size_t(i)] = label_of_(q[std::size_t(i)]);
     }
-    // Clusters: tet vertices joined by edges shorter than the threshold in label space.
-    UnionFind clusters(4);
+    // Clusters by complete linkage: merge the closest groups while every pair across them is within the
+    // threshold, so no cluster (and no piece, whose labels are convex combinations of one cluster's) spans it.
+    std::array<std::array<double, 4>, 4> distance{};
     bool far = false;
     for (int i = 0; i < 4; ++i)
-      for (int j = i + 1; j < 4; ++j) {
-        if ((L[std::size_t(i)] - L[std::size_t(j)]).norm() <= threshold_)
-          clusters.unite(i, j);
-        else
-          far = true;
+      for (int j = 0; j < 4; ++j) {
+        distance[std::size_t(i)][std::size_t(j)] = (L[std::size_t(i)] - L[std::size_t(j)]).norm();
+        far = far || distance[std::size_t(i)][std::size_t(j)] > threshold_;
       }
     if (!far) return false;
+    std::array<int, 4> group{0, 1, 2, 3};
+    for (;;) {
+      int best_a = -1, best_b = -1;
+      double best = threshold_;
+      for (int a = 0; a < 4; ++a)
+        for (int b = a + 1; b < 4; ++b) {
+          if (group[std::size_t(a)] != a || group[std::size_t(b)] != b) continue;  // a, b name their groups
+          double linkage = 0.0;
+          for (int i = 0; i < 4; ++i)
+            for (int j = 0; j < 4; ++j)
+              if (group[std::size_t(i)] == a && group[std::size_t(j)] == b)
+                linkage = std::max(linkage, distance[std::size_t(i)][std::size_t(j)]);
+          if (linkage <= best) best = linkage, best_a = a, best_b = b;
+        }
+      if (best_a < 0) break;
+      for (int& g : group)
+        if (g == best_b) g = best_a;
+    }
     std::array<int, 4> cluster{};
     int cluster_count = 0;
-    std::array<int, 4> root_id{-1, -1, -1, -1};
+    std::array<int, 4> number{-1, -1, -1, -1};
     for (int i = 0; i < 4; ++i) {
-      const int r = clusters.find(i);
-      if (root_id[std::size_t(r)] < 0) root_id[std::size_t(r)] = cluster_count++;
-      cluster[std::size_t(i)] = root_id[std::size_t(r)];
+      int& n = number[std::size_t(group[std::size_t(i)])];
+      if (n < 0) n = cluster_count++;
+      cluster[std::size_t(i)] = n;
     }
     if (cluster_count < 2) return false;  // far pairs joined through a third vertex: no separable sides
     ++result.seam_tets;
@@ -236,7 +254,7 @@ class TopologicalPass {
       std::vector<int> ids;
       std::vector<int> position_ids;
       for (const PolygonVertex& p : polygon) {
-        const int position = position_of(p.b, corner);
+        const int position = position_of(p.b, corner, f);
         position_ids.push_back(position);
         // A corner whose whole mesh edge lies on this side keeps the slice's own label, as its neighbours do.
         int own = -1;
@@ -252,11 +270,15 @@ class TopologicalPass {
         const std::size_t j = (i + 1) % polygon.size();
         // An edge between two cut vertices lies on the critical plane unless both sit on one triangle edge.
         const bool same_edge = ((polygon[i].b.array() == 0.0) && (polygon[j].b.array() == 0.0)).any();
-        if (polygon[i].cut && polygon[j].cut && !same_edge) out_.cut_edges.push_back({position_ids[i], position_ids[j]});
+        if (polygon[i].cut && polygon[j].cut && !same_edge)
+          out_.cut_edges.push_back({position_ids[i], position_ids[j]});
       }
       for (std::size_t i = 1; i + 1 < ids.size(); ++i) add_face({ids[0], ids[i], ids[i + 1]}, int(f));
     }
-    if (pieces > 1) ++result.topological_split;
+    if (pieces > 1) {
+      ++result.topological_split;
+      out_.split_faces.push_back({corner[0], corner[1], corner[2]});
+    }
     return true;
   }
 
@@ -284,7 +306,7 @@ class TopologicalPass {
 
   // Position id of a polygon vertex: an input corner, a point on an input edge (shared with the
   // neighbour, keyed by the edge's vertex ids and the parameter from the lower id), or a new interior point.
-  int position_of(const Eigen::Vector3d& b, const std::array<int, 3>& corner) {
+  int position_of(const Eigen::Vector3d& b, const std::array<int, 3>& corner, Eigen::Index face) {
     int nonzero = 0;
     for (int k = 0; k < 3; ++k) nonzero += b(k) != 0.0;
     for (int k = 0; k < 3; ++k)
@@ -306,8 +328,14 @@ class TopologicalPass {
       }
       return it->second;
     }
-    out_.positions.push_back(x);
-    return int(out_.positions.size()) - 1;
+    // Inside the triangle (where three clusters meet): shared by the pieces of this triangle only.
+    const auto key = std::make_tuple(face, std::llround(b(0) * 1073741824.0), std::llround(b(1) * 1073741824.0));
+    const auto [it, inserted] = position_inside_.emplace(key, -1);
+    if (inserted) {
+      it->second = int(out_.positions.size());
+      out_.positions.push_back(x);
+    }
+    return it->second;
   }
 
   const SliceMesh& slice_;
@@ -320,6 +348,7 @@ class TopologicalPass {
   std::vector<int> original_vertex_;
   std::map<std::tuple<int, long long, long long, long long>, int> vertex_of_;
   std::map<std::tuple<int, int, long long>, int> position_on_edge_;
+  std::map<std::tuple<Eigen::Index, long long, long long>, int> position_inside_;
 };
 
 // UV continuity between two faces of A: the same face, or faces sharing a vertex with the same UV there
@@ -332,8 +361,7 @@ class Atlas {
     const std::int64_t nv = A.V.rows();
     std::unordered_map<std::int64_t, int> half_edge;  // (a, b) -> 3 f + k, k the corner opposite the edge
     for (Eigen::Index f = 0; f < A.F.rows(); ++f)
-      for (int k = 0; k < 3; ++k)
-        half_edge.emplace(A.F(f, (k + 1) % 3) * nv + A.F(f, (k + 2) % 3), int(3 * f + k));
+      for (int k = 0; k < 3; ++k) half_edge.emplace(A.F(f, (k + 1) % 3) * nv + A.F(f, (k + 2) % 3), int(3 * f + k));
     neighbour_.assign(std::size_t(3 * A.F.rows()), -1);
     for (Eigen::Index f = 0; f < A.F.rows(); ++f)
       for (int k = 0; k < 3; ++k) {
@@ -396,14 +424,6 @@ class Atlas {
     Eigen::Vector2d uv = Eigen::Vector2d::Zero();
     for (int k = 0; k < 3; ++k) uv += w(k) * A_.UV.row(A_.FUV(f, k)).transpose();
     return uv;
-  }
-
-  // UV area per unit surface area of face f (0 for a degenerate face).
-  double uv_density(int f) const {
-    const double area = 0.5 * (corner(f, 1) - corner(f, 0)).cross(corner(f, 2) - corner(f, 0)).norm();
-    const Eigen::Vector2d a = A_.UV.row(A_.FUV(f, 0)), b = A_.UV.row(A_.FUV(f, 1)), c = A_.UV.row(A_.FUV(f, 2));
-    const double uv_area = 0.5 * std::abs((b - a).x() * (c - a).y() - (b - a).y() * (c - a).x());
-    return area > 0.0 ? uv_area / area : 0.0;
   }
 
  private:
@@ -488,9 +508,10 @@ SeamResult split_seams(const SliceMesh& slice, const TetMesh4& mesh, const Eigen
   result.span_bin_edges = {0.0, 0.01, 0.02, 0.05, 0.1, 0.15, 0.2, 0.25, 0.3, 0.4, 0.5, 0.75, 1.0};
   result.span_histogram.assign(result.span_bin_edges.size(), 0);
   for (Eigen::Index f = 0; f < slice.F.rows(); ++f) {
-    const double span = max_span(slice_labels.row(slice.F(f, 0)).transpose(), slice_labels.row(slice.F(f, 1)).transpose(),
-                                 slice_labels.row(slice.F(f, 2)).transpose()) /
-                        diagonal;
+    const double span =
+        max_span(slice_labels.row(slice.F(f, 0)).transpose(), slice_labels.row(slice.F(f, 1)).transpose(),
+                 slice_labels.row(slice.F(f, 2)).transpose()) /
+        diagonal;
     std::size_t bin = 0;
     while (bin + 1 < result.span_bin_edges.size() && span >= result.span_bin_edges[bin + 1]) ++bin;
     ++result.span_histogram[bin];
@@ -500,6 +521,15 @@ SeamResult split_seams(const SliceMesh& slice, const TetMesh4& mesh, const Eigen
   LabelledMesh mid =
       TopologicalPass(slice, slice_labels, mesh, label_of, result.threshold, diagonal).run(options.topological, result);
   result.topological_seam_curves = count_curves(mid.cut_edges);
+  {
+    // Regions: cut triangles joined through shared corners. Where a neck pinches off, the labels around the
+    // pinch point come from the whole waist ring, and the cuts there form a star of short curves; a region
+    // counts it once.
+    std::vector<std::array<int, 2>> links;
+    for (const auto& f : mid.split_faces)
+      for (int k = 0; k < 3; ++k) links.push_back({f[std::size_t(k)], f[std::size_t((k + 1) % 3)]});
+    result.topological_seam_regions = count_curves(links);
+  }
   {
     std::vector<int> points;
     for (std::size_t p = 0; p < mid.positions.size(); ++p)
@@ -531,11 +561,12 @@ SeamResult split_seams(const SliceMesh& slice, const TetMesh4& mesh, const Eigen
         if (edge_index.emplace(key, int(edges.size())).second) edges.push_back(key);
       }
     std::vector<EdgeCrossings> crossings(edges.size());
-    tbb::parallel_for(tbb::blocked_range<std::size_t>(0, edges.size(), 64), [&](const tbb::blocked_range<std::size_t>& r) {
-      for (std::size_t e = r.begin(); e != r.end(); ++e)
-        crossings[e] = find_crossings(vertex_labels[std::size_t(edges[e].first)],
-                                      vertex_labels[std::size_t(edges[e].second)], locator, atlas, options);
-    });
+    tbb::parallel_for(
+        tbb::blocked_range<std::size_t>(0, edges.size(), 64), [&](const tbb::blocked_range<std::size_t>& r) {
+          for (std::size_t e = r.begin(); e != r.end(); ++e)
+            crossings[e] = find_crossings(vertex_labels[std::size_t(edges[e].first)],
+                                          vertex_labels[std::size_t(edges[e].second)], locator, atlas, options);
+        });
     std::vector<int> first_vertex(edges.size(), -1);
     for (std::size_t e = 0; e < edges.size(); ++e) {
       result.texture_crossings += std::int64_t(crossings[e].s.size());
@@ -631,68 +662,90 @@ SeamResult split_seams(const SliceMesh& slice, const TetMesh4& mesh, const Eigen
       ++result.spans_over_threshold;
 
   if (with_uv) {
-    // Every corner takes its UV from the A face found a little toward its triangle's centroid, i.e. on
-    // the triangle's side of any seam through the corner; the UV is that face's at the corner's own label.
-    result.UV.resize(3 * nf, 2);
-    result.FUV.resize(nf, 3);
-    std::vector<std::array<int, 3>> corner_face(static_cast<std::size_t>(nf));
-    std::vector<std::array<Eigen::Vector3d, 3>> corner_point(static_cast<std::size_t>(nf));
-    tbb::parallel_for(tbb::blocked_range<Eigen::Index>(0, nf, 256), [&](const tbb::blocked_range<Eigen::Index>& r) {
-      for (Eigen::Index f = r.begin(); f != r.end(); ++f) {
-        Eigen::Vector3d centroid = Eigen::Vector3d::Zero();
-        for (int k = 0; k < 3; ++k) centroid += result.labels.row(result.F(f, k)).transpose() / 3.0;
-        const int home = locator.closest(centroid).face;
-        for (int k = 0; k < 3; ++k) {
-          const Eigen::Vector3d l = result.labels.row(result.F(f, k)).transpose();
-          const int face = atlas.walk(home, l);
-          corner_face[std::size_t(f)][std::size_t(k)] = face;
-          result.UV.row(3 * f + k) = atlas.uv_on(face, l, corner_point[std::size_t(f)][std::size_t(k)]).transpose();
-          result.FUV(f, k) = int(3 * f + k);
-        }
-      }
-    });
-
-    // UV area of each output triangle against its preimage's: the preimage triangle's area times the
-    // largest UV density of the A faces at its corners. A triangle across a seam covers a strip of the atlas.
     auto uv_area = [](const Eigen::Vector2d& a, const Eigen::Vector2d& b, const Eigen::Vector2d& c) {
       return 0.5 * std::abs((b - a).x() * (c - a).y() - (b - a).y() * (c - a).x());
     };
-    auto preimage_uv_area = [&](const std::array<Eigen::Vector3d, 3>& p, const std::array<int, 3>& face) {
-      const double area = 0.5 * (p[1] - p[0]).cross(p[2] - p[0]).norm();
-      return area * std::max({atlas.uv_density(face[0]), atlas.uv_density(face[1]), atlas.uv_density(face[2])});
+    auto uv_in_chart = [&](int home, const Eigen::Vector3d& label) {
+      Eigen::Vector3d point;
+      return atlas.uv_on(atlas.walk(home, label), label, point);
     };
-    // Tolerance: a fraction of the preimage's UV area plus the same fraction of the mean triangle's, so that
-    // nearly degenerate preimages (lat-long UVs are not affine) do not count.
+    // UV area of the triangle's true image: the triangle subdivided 4 x 4, every sample's UV taken in the
+    // home chart. It is curved where A's UVs are not affine (near the sphere's poles), where a flat UV
+    // triangle may legitimately differ from it.
+    auto image_uv_area = [&](const std::array<Eigen::Vector3d, 3>& l, int home) {
+      constexpr int n = 4;
+      Eigen::Vector2d sample[n + 1][n + 1];
+      for (int i = 0; i <= n; ++i)
+        for (int j = 0; i + j <= n; ++j)
+          sample[i][j] = uv_in_chart(home, (double(i) * l[0] + double(j) * l[1] + double(n - i - j) * l[2]) / n);
+      double area = 0.0;
+      for (int i = 0; i < n; ++i)
+        for (int j = 0; i + j < n; ++j) {
+          area += uv_area(sample[i][j], sample[i + 1][j], sample[i][j + 1]);
+          if (i + j + 1 < n) area += uv_area(sample[i + 1][j], sample[i + 1][j + 1], sample[i][j + 1]);
+        }
+      return area;
+    };
+
+    // Every corner takes its UV in the chart of the A face under its triangle's centroid (walking across
+    // non-seam edges only), so no triangle mixes charts, also when a corner lies exactly on a seam.
+    result.UV.resize(3 * nf, 2);
+    result.FUV.resize(nf, 3);
     std::vector<double> uv(static_cast<std::size_t>(nf)), pre(static_cast<std::size_t>(nf));
+    tbb::parallel_for(tbb::blocked_range<Eigen::Index>(0, nf, 256), [&](const tbb::blocked_range<Eigen::Index>& r) {
+      for (Eigen::Index f = r.begin(); f != r.end(); ++f) {
+        std::array<Eigen::Vector3d, 3> l;
+        for (int k = 0; k < 3; ++k) l[std::size_t(k)] = result.labels.row(result.F(f, k)).transpose();
+        const int home = locator.closest((l[0] + l[1] + l[2]) / 3.0).face;
+        for (int k = 0; k < 3; ++k) {
+          result.UV.row(3 * f + k) = uv_in_chart(home, l[std::size_t(k)]).transpose();
+          result.FUV(f, k) = int(3 * f + k);
+        }
+        uv[std::size_t(f)] = uv_area(result.UV.row(3 * f), result.UV.row(3 * f + 1), result.UV.row(3 * f + 2));
+        pre[std::size_t(f)] = image_uv_area(l, home);
+      }
+    });
     double mean_pre = 0.0;
-    for (Eigen::Index f = 0; f < nf; ++f) {
-      uv[std::size_t(f)] = uv_area(result.UV.row(3 * f), result.UV.row(3 * f + 1), result.UV.row(3 * f + 2));
-      pre[std::size_t(f)] = preimage_uv_area(corner_point[std::size_t(f)], corner_face[std::size_t(f)]);
-      mean_pre += pre[std::size_t(f)] / double(std::max<Eigen::Index>(nf, 1));
-    }
-    auto over = [&](double uv_f, double pre_f) {
-      return uv_f > (1.0 + options.uv_area_tolerance) * pre_f + options.uv_area_tolerance * mean_pre +
-                        options.uv_area_epsilon;
-    };
+    for (const double a : pre) mean_pre += a / double(pre.size());
     result.mean_preimage_uv_area = mean_pre;
+    // A triangle across a seam covers a strip of the atlas, tens of mean triangles.
+    auto over_by = [&](double uv_f, double pre_f, double tolerance) {
+      return uv_f > pre_f + tolerance * std::max(pre_f, mean_pre) + options.uv_area_epsilon;
+    };
+    auto over = [&](double uv_f, double pre_f) { return over_by(uv_f, pre_f, options.uv_area_tolerance); };
+    result.tolerance_sweep = {0.5, 1.0, 2.0, 4.0, 8.0, 16.0};
+    result.uv_area_excess_sweep.assign(result.tolerance_sweep.size(), 0);
+    result.uv_area_excess_unsplit_sweep.assign(result.tolerance_sweep.size(), 0);
+    for (std::size_t t = 0; t < result.tolerance_sweep.size(); ++t)
+      for (std::size_t f = 0; f < uv.size(); ++f)
+        result.uv_area_excess_sweep[t] += over_by(uv[f], pre[f], result.tolerance_sweep[t]);
     for (Eigen::Index f = 0; f < nf; ++f) {
       if (over(uv[std::size_t(f)], pre[std::size_t(f)])) result.uv_area_excess_faces.push_back(int(f));
       if (pre[std::size_t(f)] > 0.0)
         result.max_uv_area_ratio = std::max(result.max_uv_area_ratio, uv[std::size_t(f)] / pre[std::size_t(f)]);
     }
     result.uv_area_excess = std::int64_t(result.uv_area_excess_faces.size());
+
     // The same measure before any seam handling: per-vertex closest-point UVs on the input triangles.
     const std::vector<SurfaceHit> hits = locator.closest_all(slice.labels);
-    for (Eigen::Index f = 0; f < slice.F.rows(); ++f) {
-      std::array<Eigen::Vector3d, 3> p;
-      std::array<int, 3> face{};
-      std::array<Eigen::Vector2d, 3> uv_k;
-      for (int k = 0; k < 3; ++k) {
-        const SurfaceHit& h = hits[std::size_t(slice.F(f, k))];
-        face[std::size_t(k)] = h.face;
-        uv_k[std::size_t(k)] = atlas.uv_on(h.face, slice.labels.row(slice.F(f, k)).transpose(), p[std::size_t(k)]);
-      }
-      result.uv_area_excess_unsplit += over(uv_area(uv_k[0], uv_k[1], uv_k[2]), preimage_uv_area(p, face));
+    const Eigen::MatrixXd vertex_uv = uv_at(A, hits);
+    std::vector<double> unsplit_uv(std::size_t(slice.F.rows())), unsplit_pre(std::size_t(slice.F.rows()));
+    tbb::parallel_for(
+        tbb::blocked_range<Eigen::Index>(0, slice.F.rows(), 256), [&](const tbb::blocked_range<Eigen::Index>& r) {
+          for (Eigen::Index f = r.begin(); f != r.end(); ++f) {
+            std::array<Eigen::Vector3d, 3> l;
+            for (int k = 0; k < 3; ++k) l[std::size_t(k)] = hits[std::size_t(slice.F(f, k))].point;
+            const int home = locator.closest((l[0] + l[1] + l[2]) / 3.0).face;
+            const double a =
+                uv_area(vertex_uv.row(slice.F(f, 0)), vertex_uv.row(slice.F(f, 1)), vertex_uv.row(slice.F(f, 2)));
+            unsplit_uv[std::size_t(f)] = a;
+            unsplit_pre[std::size_t(f)] = image_uv_area(l, home);
+          }
+        });
+    for (std::size_t f = 0; f < unsplit_uv.size(); ++f) {
+      result.uv_area_excess_unsplit += over(unsplit_uv[f], unsplit_pre[f]);
+      for (std::size_t t = 0; t < result.tolerance_sweep.size(); ++t)
+        result.uv_area_excess_unsplit_sweep[t] += over_by(unsplit_uv[f], unsplit_pre[f], result.tolerance_sweep[t]);
     }
   }
   result.seconds = seconds_since(start);
