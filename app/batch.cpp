@@ -126,6 +126,7 @@ const std::vector<std::string> kColumns = {"job",
                                            "label_seconds",
                                            "map_seconds",
                                            "total_seconds",
+                                           "cpu_seconds",
                                            "peak_memory_bytes",
                                            "error"};
 
@@ -145,6 +146,7 @@ std::vector<std::string> cells(const SummaryRow& r) {
           number(r.label_seconds, 4),
           number(r.map_seconds, 4),
           number(r.total_seconds, 4),
+          number(r.cpu_seconds, 4),
           integer(r.peak_memory_bytes),
           r.error};
 }
@@ -487,6 +489,7 @@ SummaryRow summary_row(const std::string& job, const std::string& report_json) {
   row.label_seconds = optional_at<double>(r, "/seconds/transport"_json_pointer);
   row.total_seconds = optional_at<double>(r, "/seconds/total"_json_pointer);
   row.peak_memory_bytes = optional_at<std::int64_t>(r, "/peak_memory_bytes"_json_pointer);
+  row.cpu_seconds = optional_at<double>(r, "/cpu_seconds"_json_pointer);
   if (row.total_seconds)
     row.map_seconds = *row.total_seconds - optional_at<double>(r, "/seconds/compare"_json_pointer).value_or(0.0);
   return row;
@@ -507,12 +510,12 @@ std::string summary_csv(const std::vector<SummaryRow>& rows) {
 std::string summary_markdown(const std::vector<SummaryRow>& rows) {
   std::string text =
       "| job | status | tets | time steps | diffusion iters | diffusion s | diffusion conv | solver | solve iters | "
-      "solve s | solve residual | label passes | label s | map s | total s | peak memory | error |\n"
-      "|---|---|--:|--:|--:|--:|--:|---|--:|--:|--:|--:|--:|--:|--:|--:|---|\n";
+      "solve s | solve residual | label passes | label s | map s | total s | cpu s | peak memory | error |\n"
+      "|---|---|--:|--:|--:|--:|--:|---|--:|--:|--:|--:|--:|--:|--:|--:|--:|---|\n";
   for (const SummaryRow& row : rows) {
     std::vector<std::string> values = cells(row);
     if (row.peak_memory_bytes)
-      values[15] = number(double(*row.peak_memory_bytes) / (1024.0 * 1024.0 * 1024.0), 3) + " GiB";
+      values[16] = number(double(*row.peak_memory_bytes) / (1024.0 * 1024.0 * 1024.0), 3) + " GiB";
     text += "|";
     for (const std::string& v : values) text += " " + md_cell(v) + " |";
     text += '\n';

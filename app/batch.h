@@ -44,6 +44,7 @@ struct SummaryRow {
   std::optional<double> label_seconds;
   std::optional<double> map_seconds;    ///< the map end to end: total_seconds less the comparison solves
   std::optional<double> total_seconds;  ///< the whole job, comparison solves included
+  std::optional<double> cpu_seconds;    ///< the job's CPU time (user + system, all threads)
   std::optional<std::int64_t> peak_memory_bytes;
   std::string error;  ///< failed: the job's one-line error
 };

@@ -45,10 +45,11 @@ cow-horse|Cow to Horse|1692940|10|7|41|0.00250|-|-|-|10|50'
 echo
 echo "Table II: paper (2 GHz AMD PC) above ours ($(nproc) cores, $(uname -m)). Paper total = the seconds its row lists"
 echo "(diffusion + implicit + label propagation); ours = the map end to end with the converged CG solve (load, morph,"
-echo "extraction, solve, transport, outputs), the Gauss-Seidel comparison not included; ratio = paper / ours."
+echo "extraction, solve, transport, outputs), the Gauss-Seidel comparison not included; ratio = paper / ours. The last"
+echo "column is the whole job with the comparison diffusion, wall and CPU seconds (on a shared machine wall >> CPU / cores)."
 echo
-echo "| morph | who | tets | steps | diffusion (iters, s, conv) | implicit/direct (iters, s, residual) | label prop (passes, s) | total s | ratio |"
-echo "|---|---|--:|--:|---|---|---|--:|--:|"
+echo "| morph | who | tets | steps | diffusion (iters, s, conv) | implicit/direct (iters, s, residual) | label prop (passes, s) | total s | ratio | with GS: wall s, CPU s |"
+echo "|---|---|--:|--:|---|---|---|--:|--:|---|"
 awk -F',' -v paper="$paper" '
   BEGIN {
     n = split(paper, lines, "\n")
@@ -61,15 +62,15 @@ awk -F',' -v paper="$paper" '
       job = order[i]; split(row[job], p, "|")
       ptotal = p[6] + (p[9] == "-" ? 0 : p[9]) + p[12]
       implicit = p[8] == "-" ? "–" : p[8] ", " p[9] ", " p[10]
-      printf "| %s | paper | %s | %s | %s, %s, %s | %s | %s, %s | %d | |\n", p[2], p[3], p[4], p[5], p[6], p[7], implicit, p[11], p[12], ptotal
-      if (!(job in seen)) { printf "| | ours | not run | | | | | | |\n"; continue }
-      if (v[job, col["status"]] != "ok") { printf "| | ours | %s: %s | | | | | | |\n", v[job, col["status"]], v[job, col["error"]]; continue }
+      printf "| %s | paper | %s | %s | %s, %s, %s | %s | %s, %s | %d | | |\n", p[2], p[3], p[4], p[5], p[6], p[7], implicit, p[11], p[12], ptotal
+      if (!(job in seen)) { printf "| | ours | not run | | | | | | | |\n"; continue }
+      if (v[job, col["status"]] != "ok") { printf "| | ours | %s: %s | | | | | | | |\n", v[job, col["status"]], v[job, col["error"]]; continue }
       t = v[job, col["map_seconds"]]
-      printf "| | ours | %s | %s | %s, %.2f, %.2g | %s %s, %.2f, %.2g | %s, %.2f | %.2f (%.2f with GS) | %.1f× |\n",
+      printf "| | ours | %s | %s | %s, %.2f, %.2g | %s %s, %.2f, %.2g | %s, %.2f | %.2f | %.1f× | %.2f, %.2f |\n",
         v[job, col["tets"]], v[job, col["time_steps"]],
         v[job, col["diffusion_iterations"]], v[job, col["diffusion_seconds"]], v[job, col["diffusion_conv"]],
         v[job, col["solve_backend"]], v[job, col["solve_iterations"]], v[job, col["solve_seconds"]], v[job, col["solve_residual"]],
-        v[job, col["label_passes"]], v[job, col["label_seconds"]], t, v[job, col["total_seconds"]], ptotal / t
+        v[job, col["label_passes"]], v[job, col["label_seconds"]], t, ptotal / t, v[job, col["total_seconds"]], v[job, col["cpu_seconds"]]
     }
   }' "$out/summary.csv"
 echo
