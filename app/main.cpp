@@ -1,4 +1,4 @@
-// The `morphmap` command: map, demo, stretch, batch.
+// The `morphmap` command: map, demo, stretch, batch, render.
 #include <unistd.h>
 
 #include <CLI/CLI.hpp>
@@ -46,8 +46,40 @@ int main(int argc, char** argv) {
   batch->add_option("-o,--output", batch_options.output_dir, "Output directory: one folder per job, summary.csv/.md")
       ->required();
 
+  CLI::App* render = app.add_subcommand("render", "Render a mesh to PNG: texture, checkerboard or stretch heat map");
+  std::string render_mesh, render_png, render_labels, render_source, render_size = "480x480";
+  std::vector<double> render_view;
+  int render_checker = 0;
+  bool render_shaded = false;
+  morphmap::RenderOptions& render_options = options.render_options;
+  render->add_option("MESH", render_mesh, "Mesh file (.obj with UVs and MTL texture, .off, .ply)")->required();
+  render->add_option("-o,--output", render_png, "PNG file to write")->required();
+  render->add_option("--heat", render_labels, "labels.txt of MESH: colour by per-triangle L2 stretch (needs --source)");
+  render->add_option("--source", render_source, "The source surface of the labels (file or built-in shape)");
+  render->add_option("--checker", render_checker, "Checkerboard with N squares per side instead of the texture")
+      ->check(CLI::Range(1, 1024));
+  render->add_flag("--shaded", render_shaded, "Grey shading only");
+  for (CLI::App* cmd : {render, map, demo}) {
+    cmd->add_option("--view", render_view, "Direction from the shape towards the camera, x,y,z")
+        ->delimiter(',')
+        ->expected(3);
+    cmd->add_option("--size", render_size, "Image (per panel) size WxH")->capture_default_str();
+  }
+  map->add_flag("--render", options.render, "Also write contact_sheet.png (A, the slices, B)");
+
   try {
     app.parse(argc, argv);
+    int used = 0;
+    if (std::sscanf(render_size.c_str(), "%dx%d%n", &render_options.width, &render_options.height, &used) != 2 ||
+        used != int(render_size.size()))
+      throw morphmap::InvalidInput("--size: '" + render_size + "' is not WxH (e.g. 640x480)");
+    if (!render_view.empty()) render_options.view = Eigen::Vector3d(render_view[0], render_view[1], render_view[2]);
+    if (render_checker > 0) {
+      render_options.mode = morphmap::RenderMode::checker;
+      render_options.checker_squares = render_checker;
+    }
+    if (render_shaded) render_options.mode = morphmap::RenderMode::shaded;
+    morphmap::validate_render_options(render_options);
   } catch (const CLI::CallForHelp& e) {
     return app.exit(e);
   } catch (const CLI::CallForAllHelp& e) {
@@ -65,6 +97,7 @@ int main(int argc, char** argv) {
     options.target = "torus";
     options.output_dir = demo_dir;
     if (options.slices.empty()) options.slices = {0.25, 0.5, 0.75};
+    options.render = true;
   }
 
   try {
@@ -73,6 +106,11 @@ int main(int argc, char** argv) {
       const morphmap::BatchResult result = morphmap::run_batch(batch_options);
       if (result.interrupted) return 130;
       return result.failed > 0 ? 1 : 0;
+    }
+    if (render->parsed()) {
+      const morphmap::RenderResult r = morphmap::render_file(render_mesh, render_labels, render_source, render_options);
+      morphmap::write_png_atomically(render_png, r.image);
+      return 0;
     }
     if (stretch->parsed()) {
       std::cout << morphmap::stretch_json(morphmap::stretch_of_files(stretch_target, stretch_labels, stretch_source))

@@ -176,15 +176,19 @@ nlohmann::json seams_json(const SeamResult& r, const SeamOptions& o) {
 
 }  // namespace
 
-StretchResult stretch_of_files(const std::string& target, const std::string& labels, const std::string& source) {
-  const Surface B = read_surface(target);
+StretchInputs read_stretch_inputs(const std::string& target, const std::string& labels, const std::string& source) {
+  StretchInputs inputs;
+  Surface& B = inputs.B;
+  Surface& A = inputs.A;
+  B = read_surface(target);
   validate_surface(B, false);
-  Surface A = is_builtin_shape(source) ? make_shape(parse_shape_spec(source), std::optional(bounding_box(B.V)))
-                                       : read_surface(source);
+  A = is_builtin_shape(source) ? make_shape(parse_shape_spec(source), std::optional(bounding_box(B.V)))
+                               : read_surface(source);
   validate_surface(A, true);
   std::ifstream in(labels);
   if (!in) throw IoError(labels + ": cannot open file");
-  Eigen::MatrixXd pre(B.V.rows(), 3);
+  Eigen::MatrixXd& pre = inputs.preimages;
+  pre.resize(B.V.rows(), 3);
   std::string line;
   Eigen::Index row = 0;
   while (std::getline(in, line)) {
@@ -200,7 +204,26 @@ StretchResult stretch_of_files(const std::string& target, const std::string& lab
   if (row != pre.rows())
     throw InvalidInput(labels + ": " + std::to_string(row) + " lines for the " + std::to_string(pre.rows()) +
                        " vertices of " + target);
-  return measure_stretch(A, B.V, B.F, pre);
+  return inputs;
+}
+
+StretchResult stretch_of_files(const std::string& target, const std::string& labels, const std::string& source) {
+  const StretchInputs in = read_stretch_inputs(target, labels, source);
+  return measure_stretch(in.A, in.B.V, in.B.F, in.preimages);
+}
+
+RenderResult render_file(const std::string& mesh, const std::string& labels, const std::string& source,
+                         const RenderOptions& options) {
+  if (labels.empty() != source.empty()) throw InvalidInput("render: --heat LABELS and --source SOURCE go together");
+  if (!labels.empty()) {
+    const StretchInputs in = read_stretch_inputs(mesh, labels, source);
+    RenderOptions heat = options;
+    heat.mode = RenderMode::heat;
+    return render_surface(in.B, heat, stretch_per_triangle(in.A, in.B.V, in.B.F, in.preimages));
+  }
+  const Surface surface = read_surface(mesh);
+  validate_surface(surface, false);
+  return render_surface(surface, options);
 }
 
 PipelineResult run_pipeline(const PipelineOptions& options) {
@@ -308,6 +331,39 @@ PipelineResult run_pipeline(const PipelineOptions& options) {
   const Eigen::MatrixXd seam_preimages = frame_a.to_world(points_of(locator.closest_all(result.target_seams.labels)));
   seconds["seams"] = seconds_since(start);
   progress.stage("seams", seconds["seams"]);
+
+  // Contact sheet (paper Figures 1 and 9) in the morph frame, where A, the slices and B share one camera.
+  std::optional<RgbImage> contact_sheet;
+  if (options.render && !options.output_dir.empty()) {
+    std::vector<Surface> panels;
+    panels.push_back(A);
+    std::shared_ptr<const RgbImage> texture = A.texture;
+    if (!texture && A.has_uv() && A.has_texture()) texture = std::make_shared<const RgbImage>(read_image(A.texture_path));
+    // The seam-split meshes with their per-corner UVs, exactly what target.obj and the slices hold.
+    auto panel = [&](const SeamResult& seams, const std::string& name) {
+      Surface p;
+      p.V = seams.V;
+      p.F = seams.F.cast<int>();
+      if (seams.UV.rows() > 0 && seams.FUV.rows() == seams.F.rows()) {
+        p.UV = seams.UV;
+        p.FUV = seams.FUV.cast<int>();
+        p.texture = texture;
+      }
+      p.name = name;
+      panels.push_back(std::move(p));
+    };
+    for (const SliceOut& s : slices) panel(s.seams, "slice " + format_time(s.t));
+    panel(result.target_seams, "target");
+    const RenderResult sheet = render_contact_sheet(panels, options.render_options);
+    contact_sheet = sheet.image;
+    seconds["render"] = sheet.seconds;
+    report["render"] = {{"file", "contact_sheet.png"},
+                        {"panels", panels.size()},
+                        {"mode", render_mode_name(sheet.mode)},
+                        {"width", sheet.image.width},
+                        {"height", sheet.image.height}};
+    progress.stage("render", sheet.seconds);
+  }
 
   result.target_labels = frame_a.to_world(points_of(hits));
   result.target.V = frame_b.to_world(result.target.V);
@@ -439,6 +495,7 @@ PipelineResult run_pipeline(const PipelineOptions& options) {
                               {"seams", seams_json(s.seams, options.seams)}});
     }
     report["slices"] = slice_report;
+    if (contact_sheet) write_png(out->staged("contact_sheet.png"), *contact_sheet);
   }
   seconds["write"] = seconds_since(start);
   seconds["total"] = seconds_since(start_total);

@@ -5,6 +5,7 @@
 #include <string>
 #include <vector>
 
+#include "io/render.h"
 #include "mesh/extract.h"
 #include "mesh/metrics.h"
 #include "mesh/morph.h"
@@ -32,6 +33,8 @@ struct PipelineOptions {
   int threads = 0;                 ///< worker threads; 0 = all cores
   long long max_memory_bytes = 0;  ///< refuse (InvalidInput) a run whose estimated peak memory exceeds this; 0 = no limit
   bool progress = false;           ///< print stage names and times to stderr
+  bool render = false;             ///< write contact_sheet.png (A, the slices, B with one camera) into output_dir
+  RenderOptions render_options;    ///< size and camera of each contact sheet panel
 };
 
 struct PipelineResult {
@@ -58,6 +61,18 @@ std::string stretch_json(const StretchResult& stretch);
 /// `morphmap stretch`: reads TARGET (a mesh file), one preimage per vertex from LABELS, and SOURCE (a file
 /// or a built-in shape, fitted to the target's box like `map` does) and returns the stretch figures.
 StretchResult stretch_of_files(const std::string& target, const std::string& labels, const std::string& source);
+
+/// What `morphmap stretch` and `render --heat` read: SOURCE (A), TARGET (B) and one preimage per vertex of B.
+struct StretchInputs {
+  Surface A, B;
+  Eigen::MatrixXd preimages;  ///< #B.V by 3, points of A
+};
+StretchInputs read_stretch_inputs(const std::string& target, const std::string& labels, const std::string& source);
+
+/// `morphmap render`: renders MESH (a file) with `options`; with LABELS and SOURCE (both or neither) as a heat
+/// map of the per-triangle L2 stretch of the map MESH -> SOURCE. Throws InvalidInput / IoError naming the file.
+RenderResult render_file(const std::string& mesh, const std::string& labels, const std::string& source,
+                         const RenderOptions& options);
 
 /// Runs every stage and writes the outputs (target.obj, labels.txt, slices, report.json) atomically
 /// into options.output_dir. Throws InvalidInput / IoError / TopologyError / SolverError.

@@ -15,26 +15,37 @@
 
 namespace morphmap {
 
-StretchResult measure_stretch(const Surface& A, const Eigen::MatrixXd& V, const TriIndices& F,
-                              const Eigen::MatrixXd& preimages, const StretchOptions& options) {
-  const auto start = std::chrono::steady_clock::now();
+namespace {
+
+// Per-triangle pieces of the map from each preimage triangle (on A) to its triangle of B, shared by the
+// statistics and the per-triangle values so both use one definition.
+struct TriangleMaps {
+  Eigen::VectorXd area_b, area_p, sigma1, sigma2;  // sigma NaN where the preimage triangle is flat
+  Eigen::MatrixXd centroid;                        // preimage centroids, #F by 3
+  std::vector<Eigen::Vector3d> normal_p;           // unnormalised preimage normals
+};
+
+void check_stretch_inputs(const Eigen::MatrixXd& V, const TriIndices& F, const Eigen::MatrixXd& preimages) {
   if (V.cols() != 3 || preimages.cols() != 3 || preimages.rows() != V.rows())
     throw InvalidInput("measure_stretch: need #V by 3 positions and one preimage per vertex (" +
                        std::to_string(preimages.rows()) + " preimages for " + std::to_string(V.rows()) + " vertices)");
   if (F.rows() > 0 && (F.minCoeff() < 0 || F.maxCoeff() >= V.rows()))
     throw InvalidInput("measure_stretch: face index out of range");
-  StretchResult r;
-  r.triangles = F.rows();
-  r.area_a = surface_area(A.V, A.F);
-  const Eigen::MatrixXi Fi = F.cast<int>();
-  r.area_b = surface_area(V, Fi);
-  if (!(r.area_a > 0.0) || !(r.area_b > 0.0)) throw InvalidInput("measure_stretch: a surface has zero area");
-  const double normalise = std::sqrt(r.area_b / r.area_a);
+}
 
+TriangleMaps triangle_maps(const Eigen::MatrixXd& V, const TriIndices& F, const Eigen::MatrixXd& preimages,
+                           double normalise) {
+  TriangleMaps m;
   const Eigen::Index n = F.rows();
-  Eigen::VectorXd area_b(n), area_p(n), sigma1(n), sigma2(n);
-  Eigen::MatrixXd centroid(n, 3);
-  std::vector<Eigen::Vector3d> normal_p(static_cast<std::size_t>(n));
+  m.area_b.resize(n);
+  m.area_p.resize(n);
+  m.sigma1.resize(n);
+  m.sigma2.resize(n);
+  m.centroid.resize(n, 3);
+  m.normal_p.resize(static_cast<std::size_t>(n));
+  Eigen::VectorXd &area_b = m.area_b, &area_p = m.area_p, &sigma1 = m.sigma1, &sigma2 = m.sigma2;
+  Eigen::MatrixXd& centroid = m.centroid;
+  std::vector<Eigen::Vector3d>& normal_p = m.normal_p;
   tbb::parallel_for(tbb::blocked_range<Eigen::Index>(0, n), [&](const tbb::blocked_range<Eigen::Index>& range) {
     for (Eigen::Index f = range.begin(); f != range.end(); ++f) {
       const Eigen::Vector3d q0 = V.row(F(f, 0)), q1 = V.row(F(f, 1)), q2 = V.row(F(f, 2));
@@ -61,6 +72,33 @@ StretchResult measure_stretch(const Surface& A, const Eigen::MatrixXd& V, const 
     }
   });
 
+  return m;
+}
+
+bool collapsed(const TriangleMaps& maps, Eigen::Index f, double mean_preimage_area, const StretchOptions& options) {
+  return !(maps.area_p(f) > options.collapse_ratio * mean_preimage_area) || !std::isfinite(maps.sigma1(f));
+}
+
+}  // namespace
+
+StretchResult measure_stretch(const Surface& A, const Eigen::MatrixXd& V, const TriIndices& F,
+                              const Eigen::MatrixXd& preimages, const StretchOptions& options) {
+  const auto start = std::chrono::steady_clock::now();
+  check_stretch_inputs(V, F, preimages);
+  StretchResult r;
+  r.triangles = F.rows();
+  r.area_a = surface_area(A.V, A.F);
+  const Eigen::MatrixXi Fi = F.cast<int>();
+  r.area_b = surface_area(V, Fi);
+  if (!(r.area_a > 0.0) || !(r.area_b > 0.0)) throw InvalidInput("measure_stretch: a surface has zero area");
+  const double normalise = std::sqrt(r.area_b / r.area_a);
+
+  const TriangleMaps maps = triangle_maps(V, F, preimages, normalise);
+  const Eigen::Index n = F.rows();
+  const Eigen::VectorXd &area_b = maps.area_b, &area_p = maps.area_p, &sigma1 = maps.sigma1, &sigma2 = maps.sigma2;
+  const Eigen::MatrixXd& centroid = maps.centroid;
+  const std::vector<Eigen::Vector3d>& normal_p = maps.normal_p;
+
   // Folds: the preimage triangle's normal against A's outward normal at its centroid.
   const SurfaceLocator locator(A);
   const std::vector<SurfaceHit> hits = locator.closest_all(centroid);
@@ -70,7 +108,7 @@ StretchResult measure_stretch(const Surface& A, const Eigen::MatrixXd& V, const 
   r.max_sigma1 = 0.0;
   for (Eigen::Index f = 0; f < n; ++f) {
     r.coverage += area_p(f);
-    if (!(area_p(f) > options.collapse_ratio * mean_preimage_area) || !std::isfinite(sigma1(f))) {
+    if (collapsed(maps, f, mean_preimage_area, options)) {
       ++r.collapsed;
       continue;
     }
@@ -94,6 +132,22 @@ StretchResult measure_stretch(const Surface& A, const Eigen::MatrixXd& V, const 
   if (r.measured == 0) r.min_sigma2 = 0.0;
   r.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
   return r;
+}
+
+Eigen::VectorXd stretch_per_triangle(const Surface& A, const Eigen::MatrixXd& V, const TriIndices& F,
+                                     const Eigen::MatrixXd& preimages, const StretchOptions& options) {
+  check_stretch_inputs(V, F, preimages);
+  const double area_a = surface_area(A.V, A.F), area_b = surface_area(V, F.cast<int>());
+  if (!(area_a > 0.0) || !(area_b > 0.0)) throw InvalidInput("stretch_per_triangle: a surface has zero area");
+  const TriangleMaps maps = triangle_maps(V, F, preimages, std::sqrt(area_b / area_a));
+  const Eigen::Index n = F.rows();
+  const double mean_preimage_area = maps.area_p.sum() / std::max<Eigen::Index>(1, n);
+  Eigen::VectorXd l2(n);
+  for (Eigen::Index f = 0; f < n; ++f) {
+    l2(f) = collapsed(maps, f, mean_preimage_area, options) ? std::numeric_limits<double>::quiet_NaN()
+                      : std::sqrt(0.5 * (maps.sigma1(f) * maps.sigma1(f) + maps.sigma2(f) * maps.sigma2(f)));
+  }
+  return l2;
 }
 
 }  // namespace morphmap

@@ -36,4 +36,9 @@ struct StretchResult {
 StretchResult measure_stretch(const Surface& A, const Eigen::MatrixXd& V, const TriIndices& F,
                               const Eigen::MatrixXd& preimages, const StretchOptions& options = {});
 
+/// Per-triangle L2 stretch sqrt((s1^2 + s2^2) / 2) of the same map, normalised like measure_stretch (#F values);
+/// NaN for the triangles measure_stretch counts as collapsed. For stretch heat maps.
+Eigen::VectorXd stretch_per_triangle(const Surface& A, const Eigen::MatrixXd& V, const TriIndices& F,
+                                     const Eigen::MatrixXd& preimages, const StretchOptions& options = {});
+
 }  // namespace morphmap

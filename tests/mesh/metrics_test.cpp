@@ -3,6 +3,8 @@
 
 #include <gtest/gtest.h>
 
+#include <cmath>
+
 #include "mesh/errors.h"
 #include "mesh/shapes.h"
 
@@ -73,6 +75,35 @@ TEST(Stretch, FoldedAndCollapsedPreimagesAreCounted) {
 TEST(Stretch, RejectsMismatchedInput) {
   const Surface A = unit_sphere();
   EXPECT_THROW(measure_stretch(A, A.V, faces_of(A), A.V.topRows(3)), InvalidInput);
+}
+
+TEST(Stretch, PerTriangleValuesAgreeWithTheStatistics) {
+  // A non-uniform map: each vertex pushed outwards by an amount that grows with x, so L2 varies per triangle.
+  const Surface A = unit_sphere();
+  Eigen::MatrixXd B = A.V;
+  for (Eigen::Index i = 0; i < B.rows(); ++i) B.row(i) *= 1.0 + 0.4 * (A.V(i, 0) + 1.0);
+  const StretchResult r = measure_stretch(A, B, faces_of(A), A.V);
+  const Eigen::VectorXd l2 = stretch_per_triangle(A, B, faces_of(A), A.V);
+  ASSERT_EQ(l2.size(), A.F.rows());
+  double weight = 0.0, sum = 0.0;
+  for (Eigen::Index f = 0; f < A.F.rows(); ++f) {
+    ASSERT_TRUE(std::isfinite(l2(f)));
+    const Eigen::Vector3d a = B.row(A.F(f, 0)), b = B.row(A.F(f, 1)), c = B.row(A.F(f, 2));
+    const double area = 0.5 * (b - a).cross(c - a).norm();
+    weight += area;
+    sum += area * l2(f);
+  }
+  EXPECT_NEAR(sum / weight, r.mean_l2, 1e-12);
+  EXPECT_GT(l2.maxCoeff() - l2.minCoeff(), 0.05);  // the map really is non-uniform
+  // The identity has L2 = 1 everywhere; a collapsed preimage gives NaN.
+  Eigen::MatrixXd pre = A.V;
+  pre.row(A.F(0, 1)) = pre.row(A.F(0, 0));
+  pre.row(A.F(0, 2)) = pre.row(A.F(0, 0));
+  const Eigen::VectorXd l2_collapsed = stretch_per_triangle(A, A.V, faces_of(A), pre);
+  EXPECT_TRUE(std::isnan(l2_collapsed(0)));
+  const Eigen::VectorXd l2_identity = stretch_per_triangle(A, A.V, faces_of(A), A.V);
+  EXPECT_NEAR(l2_identity.minCoeff(), 1.0, 1e-9);
+  EXPECT_NEAR(l2_identity.maxCoeff(), 1.0, 1e-9);
 }
 
 }  // namespace
