@@ -34,10 +34,10 @@ class EmbreeScene {
     // ROBUST: watertight traversal, so no ray slips through a shared edge between two triangles.
     rtcSetSceneFlags(scene_, RTC_SCENE_FLAG_ROBUST);
     RTCGeometry geometry = rtcNewGeometry(device_, RTC_GEOMETRY_TYPE_TRIANGLE);
-    auto* vertices = static_cast<float*>(rtcSetNewGeometryBuffer(geometry, RTC_BUFFER_TYPE_VERTEX, 0,
-                                                                  RTC_FORMAT_FLOAT3, 3 * sizeof(float), V.rows()));
-    auto* indices = static_cast<unsigned*>(rtcSetNewGeometryBuffer(geometry, RTC_BUFFER_TYPE_INDEX, 0,
-                                                                   RTC_FORMAT_UINT3, 3 * sizeof(unsigned), F.rows()));
+    auto* vertices = static_cast<float*>(
+        rtcSetNewGeometryBuffer(geometry, RTC_BUFFER_TYPE_VERTEX, 0, RTC_FORMAT_FLOAT3, 3 * sizeof(float), V.rows()));
+    auto* indices = static_cast<unsigned*>(
+        rtcSetNewGeometryBuffer(geometry, RTC_BUFFER_TYPE_INDEX, 0, RTC_FORMAT_UINT3, 3 * sizeof(unsigned), F.rows()));
     if (vertices == nullptr || indices == nullptr) {
       rtcReleaseGeometry(geometry);
       throw IoError(name + ": Embree cannot allocate the mesh buffers");
@@ -97,12 +97,19 @@ struct Camera {
   double half_width = 0.0, half_height = 0.0;  // image plane extent at distance 1
 };
 
-Camera fit_camera(const Eigen::AlignedBox3d& box, const RenderOptions& o) {
+// Smallest ball about the box centre of V holding every vertex (tighter than the box's corners).
+std::pair<Eigen::Vector3d, double> bounding_ball(const Eigen::MatrixXd& V) {
+  const Eigen::Vector3d center = bounding_box(V).center();
+  return {center, std::sqrt((V.rowwise() - center.transpose()).rowwise().squaredNorm().maxCoeff())};
+}
+
+Camera fit_camera(const Eigen::Vector3d& center, double radius_in, const RenderOptions& o) {
   Camera c;
   const Eigen::Vector3d view = o.view.normalized();
   c.forward = -view;
   Eigen::Vector3d up = o.up.normalized();
-  if (std::abs(up.dot(view)) > 0.999) up = std::abs(view.y()) < 0.9 ? Eigen::Vector3d::UnitY() : Eigen::Vector3d::UnitZ();
+  if (std::abs(up.dot(view)) > 0.999)
+    up = std::abs(view.y()) < 0.9 ? Eigen::Vector3d::UnitY() : Eigen::Vector3d::UnitZ();
   c.right = c.forward.cross(up).normalized();
   c.up = c.right.cross(c.forward);
   const double half = std::tan(0.5 * o.fov_degrees * M_PI / 180.0);
@@ -110,9 +117,9 @@ Camera fit_camera(const Eigen::AlignedBox3d& box, const RenderOptions& o) {
   c.half_width = aspect >= 1.0 ? half * aspect : half;
   c.half_height = aspect >= 1.0 ? half : half / aspect;
   // The bounding sphere fits inside the narrower half angle.
-  const double radius = std::max(0.5 * box.diagonal().norm(), 1e-12);
+  const double radius = std::max(radius_in, 1e-12);
   const double distance = radius / std::sin(std::atan(std::min(c.half_width, c.half_height)));
-  c.eye = box.center() + 1.02 * distance * view;
+  c.eye = center + 1.1 * distance * view;  // 10% margin around the ball
   return c;
 }
 
@@ -164,10 +171,14 @@ void validate_render_options(const RenderOptions& o) {
   if (o.width <= 0 || o.height <= 0 || o.width > 16384 || o.height > 16384)
     throw InvalidInput("render: image size " + std::to_string(o.width) + "x" + std::to_string(o.height) +
                        " is not in 1..16384");
-  if (!o.view.allFinite() || o.view.norm() == 0.0) throw InvalidInput("render: view direction must be a non-zero vector");
+  if (!o.view.allFinite() || o.view.norm() == 0.0)
+    throw InvalidInput("render: view direction must be a non-zero vector");
   if (!o.up.allFinite() || o.up.norm() == 0.0) throw InvalidInput("render: up direction must be a non-zero vector");
-  if (!(o.fov_degrees > 0.0 && o.fov_degrees < 170.0)) throw InvalidInput("render: field of view must be in (0, 170) degrees");
+  if (!(o.fov_degrees > 0.0 && o.fov_degrees < 170.0))
+    throw InvalidInput("render: field of view must be in (0, 170) degrees");
   if (o.samples < 1 || o.samples > 8) throw InvalidInput("render: samples per axis must be in 1..8");
+  if (!o.frame_center.allFinite() || !std::isfinite(o.frame_radius) || o.frame_radius < 0.0)
+    throw InvalidInput("render: frame centre and radius must be finite, the radius non-negative");
   if (o.checker_squares < 1) throw InvalidInput("render: checker squares must be positive");
 }
 
@@ -182,11 +193,16 @@ RenderMode parse_render_mode(const std::string& text) {
 
 std::string render_mode_name(RenderMode mode) {
   switch (mode) {
-    case RenderMode::automatic: return "auto";
-    case RenderMode::texture: return "texture";
-    case RenderMode::checker: return "checker";
-    case RenderMode::heat: return "heat";
-    case RenderMode::shaded: return "shaded";
+    case RenderMode::automatic:
+      return "auto";
+    case RenderMode::texture:
+      return "texture";
+    case RenderMode::checker:
+      return "checker";
+    case RenderMode::heat:
+      return "heat";
+    case RenderMode::shaded:
+      return "shaded";
   }
   return "?";
 }
@@ -202,12 +218,11 @@ RenderResult render_surface(const Surface& surface, const RenderOptions& options
   RenderResult result;
   result.mode = options.mode;
   if (result.mode == RenderMode::automatic)
-    result.mode = surface.has_uv() ? (surface.has_texture() ? RenderMode::texture : RenderMode::checker)
-                                   : RenderMode::shaded;
+    result.mode =
+        surface.has_uv() ? (surface.has_texture() ? RenderMode::texture : RenderMode::checker) : RenderMode::shaded;
   if ((result.mode == RenderMode::texture || result.mode == RenderMode::checker) && !surface.has_uv())
     throw InvalidInput(name + ": has no texture coordinates for " + render_mode_name(result.mode) + " rendering");
-  if (result.mode == RenderMode::texture && !surface.has_texture())
-    throw InvalidInput(name + ": has no texture");
+  if (result.mode == RenderMode::texture && !surface.has_texture()) throw InvalidInput(name + ": has no texture");
   if (result.mode == RenderMode::heat && face_values.size() != surface.F.rows())
     throw InvalidInput(name + ": heat map needs one value per triangle (" + std::to_string(face_values.size()) +
                        " for " + std::to_string(surface.F.rows()) + " triangles)");
@@ -222,10 +237,15 @@ RenderResult render_surface(const Surface& surface, const RenderOptions& options
 
   const EmbreeScene scene(surface.V, surface.F, name);
   const Eigen::MatrixXd N = vertex_normals(surface.V, surface.F);
-  const Eigen::AlignedBox3d box = options.frame.isEmpty() ? bounding_box(surface.V) : options.frame;
-  const Camera camera = fit_camera(box, options);
+  auto [center, radius] = bounding_ball(surface.V);
+  if (options.frame_radius > 0.0) {
+    center = options.frame_center;
+    radius = options.frame_radius;
+  }
+  const Camera camera = fit_camera(center, radius, options);
   const Eigen::Vector3d light =
-      (options.light.x() * camera.right + options.light.y() * camera.up - options.light.z() * camera.forward).normalized();
+      (options.light.x() * camera.right + options.light.y() * camera.up - options.light.z() * camera.forward)
+          .normalized();
   const Rgb background = Rgb(options.background[0], options.background[1], options.background[2]) / 255.0;
 
   // Colour seen along one ray.
@@ -301,8 +321,15 @@ RenderResult render_contact_sheet(const std::vector<Surface>& panels, const Rend
   if (panels.empty()) throw InvalidInput("contact sheet: no surfaces to render");
   if (gap < 0) throw InvalidInput("contact sheet: negative gap");
   RenderOptions panel_options = options;
-  if (panel_options.frame.isEmpty())
-    for (const Surface& s : panels) panel_options.frame.extend(bounding_box(s.V));
+  if (!(panel_options.frame_radius > 0.0)) {
+    Eigen::AlignedBox3d box;
+    for (const Surface& s : panels) box.extend(bounding_box(s.V));
+    panel_options.frame_center = box.center();
+    for (const Surface& s : panels)
+      panel_options.frame_radius =
+          std::max(panel_options.frame_radius,
+                   std::sqrt((s.V.rowwise() - box.center().transpose()).rowwise().squaredNorm().maxCoeff()));
+  }
 
   RenderResult sheet;
   const int n = int(panels.size());

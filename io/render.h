@@ -26,21 +26,22 @@ RenderMode parse_render_mode(const std::string& text);
 std::string render_mode_name(RenderMode mode);
 
 struct RenderOptions {
-  int width = 480;                                    ///< image width in pixels
-  int height = 480;                                   ///< image height in pixels
+  int width = 480;                                         ///< image width in pixels
+  int height = 480;                                        ///< image height in pixels
   Eigen::Vector3d view = Eigen::Vector3d(0.35, 0.4, 1.0);  ///< direction from the scene centre towards the camera
-  Eigen::Vector3d up = Eigen::Vector3d::UnitY();      ///< world direction shown upwards (replaced if parallel to view)
-  double fov_degrees = 30.0;                          ///< field of view across the smaller image side
+  Eigen::Vector3d up = Eigen::Vector3d::UnitY();  ///< world direction shown upwards (replaced if parallel to view)
+  double fov_degrees = 30.0;                      ///< field of view across the smaller image side
   std::array<std::uint8_t, 3> background = {255, 255, 255};  ///< colour of pixels that hit nothing
-  RenderMode mode = RenderMode::automatic;            ///< what colours the surface
-  int checker_squares = 16;                           ///< squares per side of the checkerboard in checker mode
-  double heat_low = 1.0;                              ///< face value shown blue (1 = no stretch)
-  double heat_high = 2.0;                             ///< face value shown red (and above)
-  int samples = 2;                                    ///< rays per pixel per axis on a fixed grid (anti-aliasing)
-  double ambient = 0.3;                               ///< light that reaches every visible point, in [0, 1]
+  RenderMode mode = RenderMode::automatic;                   ///< what colours the surface
+  int checker_squares = 16;                                  ///< squares per side of the checkerboard in checker mode
+  double heat_low = 1.0;                                     ///< face value shown blue (1 = no stretch)
+  double heat_high = 2.0;                                    ///< face value shown red (and above)
+  int samples = 2;                                          ///< rays per pixel per axis on a fixed grid (anti-aliasing)
+  double ambient = 0.3;                                     ///< light that reaches every visible point, in [0, 1]
   Eigen::Vector3d light = Eigen::Vector3d(-0.4, 0.6, 1.0);  ///< direction towards the light in camera axes
-                                                      ///< (x right, y up, z towards the viewer)
-  Eigen::AlignedBox3d frame;                          ///< region the camera fits; empty = the surface's bounding box
+                                                            ///< (x right, y up, z towards the viewer)
+  Eigen::Vector3d frame_center = Eigen::Vector3d::Zero();   ///< centre of the ball the camera fits (looks at)
+  double frame_radius = 0.0;  ///< radius of that ball; 0 = the surface's own: its box centre and farthest vertex
 };
 
 /// Throws InvalidInput naming the first bad field (size, view, up, field of view, samples, squares).
@@ -64,8 +65,7 @@ RenderResult render_surface(const Surface& surface, const RenderOptions& options
 /// Renders the panels (e.g. A, slices in increasing t, B) with one camera fitted to all of them and puts
 /// them side by side, left to right, separated by `gap` background pixels. Each panel is
 /// options.width x options.height.
-RenderResult render_contact_sheet(const std::vector<Surface>& panels, const RenderOptions& options = {},
-                                  int gap = 8);
+RenderResult render_contact_sheet(const std::vector<Surface>& panels, const RenderOptions& options = {}, int gap = 8);
 
 /// Writes `image` as PNG to a temporary name beside `path` and renames it into place.
 void write_png_atomically(const std::string& path, const RgbImage& image);

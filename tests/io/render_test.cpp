@@ -68,7 +68,8 @@ TEST(Render, QuadShowsTheTextureColoursWhereTheyAre) {
   ASSERT_EQ(r.image.width, 65);
   ASSERT_EQ(r.image.height, 65);
   // Corners see the background.
-  for (auto [x, y] : {std::pair{0, 0}, {64, 0}, {0, 64}, {64, 64}}) EXPECT_EQ(pixel(r.image, x, y), (std::array<int, 3>{255, 255, 255}));
+  for (auto [x, y] : {std::pair{0, 0}, {64, 0}, {0, 64}, {64, 64}})
+    EXPECT_EQ(pixel(r.image, x, y), (std::array<int, 3>{255, 255, 255}));
   // The centre is u = 0.5 exactly: the green texel's centre, shaded by the facing intensity.
   const int lit = int(std::lround(255.0 * facing_intensity(o)));
   EXPECT_EQ(pixel(r.image, 32, 32), (std::array<int, 3>{0, lit, 0}));
@@ -79,7 +80,8 @@ TEST(Render, QuadShowsTheTextureColoursWhereTheyAre) {
   ASSERT_LT(left, 25);
   ASSERT_GT(right, 39);
   EXPECT_NEAR(left + right, 64, 1);  // centred
-  const int x_red = int(std::lround(left + (right - left) / 6.0)), x_blue = int(std::lround(right - (right - left) / 6.0));
+  const int x_red = int(std::lround(left + (right - left) / 6.0)),
+            x_blue = int(std::lround(right - (right - left) / 6.0));
   const std::array<int, 3> red = pixel(r.image, x_red, 32), blue = pixel(r.image, x_blue, 32);
   EXPECT_NEAR(red[0], lit, 0.15 * lit);
   EXPECT_LT(red[1], 0.15 * lit);
@@ -97,12 +99,12 @@ TEST(Render, SphereDiscAndShadingFollowTheCameraAndLight) {
   o.view = Eigen::Vector3d(0, 0, 1);
   o.samples = 1;
   o.mode = RenderMode::shaded;
-  o.frame = Eigen::AlignedBox3d(Eigen::Vector3d::Constant(-2.0), Eigen::Vector3d::Constant(2.0));
+  o.frame_radius = 3.0;  // the ball about the origin the camera fits
   const RenderResult r = render_surface(sphere(128), o);
   // Camera at distance D on the axis: the unit sphere's silhouette has radius tan(asin(1 / D)) on the image
   // plane at distance 1, whose half extent is tan(fov / 2).
   const double half = std::tan(0.5 * o.fov_degrees * M_PI / 180.0);
-  const double D = 1.02 * (0.5 * o.frame.diagonal().norm()) / std::sin(std::atan(half));
+  const double D = 1.1 * o.frame_radius / std::sin(std::atan(half));
   const double radius_px = (1.0 / std::sqrt(D * D - 1.0)) / half * 0.5 * o.width;
   EXPECT_NEAR(double(r.hit_pixels), M_PI * radius_px * radius_px, 0.04 * M_PI * radius_px * radius_px);
 
@@ -110,7 +112,8 @@ TEST(Render, SphereDiscAndShadingFollowTheCameraAndLight) {
   int best = -1, bx = 0, by = 0;
   for (int y = 0; y < o.height; ++y)
     for (int x = 0; x < o.width; ++x)
-      if (pixel(r.image, x, y)[0] != 255 && pixel(r.image, x, y)[0] > best) best = pixel(r.image, x, y)[0], bx = x, by = y;
+      if (pixel(r.image, x, y)[0] != 255 && pixel(r.image, x, y)[0] > best)
+        best = pixel(r.image, x, y)[0], bx = x, by = y;
   EXPECT_NEAR(best, 0.8 * 255.0, 3.0);
   EXPECT_LT(bx, 100);  // left of centre
   EXPECT_LT(by, 100);  // above centre
@@ -293,7 +296,8 @@ TEST_F(RenderCli, BadInputExitsTwoNamingTheFile) {
                   "short.txt");
   expect_rejected((dir_ / "quad.obj").string() + " --heat " + (dir_ / "short.txt").string(), "--source");
   // Unwritable output: the directory does not exist.
-  const CommandRun r = run_command("render " + (dir_ / "quad.obj").string() + " -o " + (dir_ / "no/such/out.png").string());
+  const CommandRun r =
+      run_command("render " + (dir_ / "quad.obj").string() + " -o " + (dir_ / "no/such/out.png").string());
   EXPECT_EQ(r.status, 2) << r.output;
   EXPECT_NE(r.output.find("out.png"), std::string::npos) << r.output;
 }
