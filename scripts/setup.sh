@@ -9,6 +9,7 @@ packages=(
   libcgal-dev libgmp-dev libmpfr-dev
   libgtest-dev libgmock-dev libbenchmark-dev
   libcli11-dev nlohmann-json3-dev libstb-dev libtinyobjloader-dev libembree-dev
+  jq
 )
 missing=()
 for p in "${packages[@]}"; do
