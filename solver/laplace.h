@@ -32,11 +32,12 @@ void barycentric_gradients(const Points4& V, const TetIndices& T, Eigen::MatrixX
 SparseMatrixD cotangent_stiffness(const Points4& V, const TetIndices& T);
 
 struct LaplaceOptions {
-  std::string solver = "cg";  ///< backend name for make_solver. cg was the fastest on every morph system of
-                              ///< bench/bench_solve.cpp (0.2M-1.7M tets, to residual 1e-8): 4-14x faster than
-                              ///< cholmod, 66-370x than ldlt, 3-7x than gauss-seidel to its threshold 1e-5
-  SolveOptions solve;         ///< tolerance, iteration limit and (gauss-seidel) change threshold
-  bool warm_start = true;     ///< iterative backends (cg, cg-ic, gauss-seidel, auto) start from s = t instead of 0
+  std::string solver = "cg-agg";  ///< backend name for make_solver. cg-agg was the fastest on 8 of the 9 morph
+                                  ///< systems of bench/bench_solve.cpp (0.2M-1.7M tets, to residual 1e-8; 1.1-1.45x
+                                  ///< faster than cg, tied at 0.2M sphere->torus), cg many times faster than cholmod,
+                                  ///< ldlt and gauss-seidel
+  SolveOptions solve;             ///< tolerance, iteration limit and (gauss-seidel) change threshold
+  bool warm_start = true;         ///< iterative backends (cg, cg-ic, gauss-seidel, auto) start from s = t instead of 0
 };
 
 /// The Dirichlet problem of solve_harmonic as one linear system A x = b over the unknowns: the interior vertices

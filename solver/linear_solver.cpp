@@ -121,7 +121,8 @@ Eigen::VectorXd check_spd_input(const SparseMatrixD& A, const std::string& backe
         const Eigen::Index i = it.row();
         if (i == j) diagonal(j) += it.value();
         // coeff() is a binary search in a compressed column.
-        else if (std::abs(it.value() - A.coeff(j, i)) > tolerance) bad_symmetry[static_cast<std::size_t>(j)] = 1;
+        else if (std::abs(it.value() - A.coeff(j, i)) > tolerance)
+          bad_symmetry[static_cast<std::size_t>(j)] = 1;
       }
       if (!(diagonal(j) > 0.0)) bad_diagonal[static_cast<std::size_t>(j)] = 1;
     }
@@ -281,8 +282,8 @@ class CholmodSolver final : public LinearSolver {
   /// One forward and backward substitution with the factor (no refinement).
   Eigen::VectorXd back_substitute(const Eigen::VectorXd& rhs) {
     const Eigen::Index n = rhs.size();
-    cholmod_dense* B = cholmod_l_allocate_dense(static_cast<std::size_t>(n), 1, static_cast<std::size_t>(n),
-                                                CHOLMOD_REAL, &common_);
+    cholmod_dense* B =
+        cholmod_l_allocate_dense(static_cast<std::size_t>(n), 1, static_cast<std::size_t>(n), CHOLMOD_REAL, &common_);
     if (B == nullptr) throw SolverError("cholmod: out of memory allocating the right-hand side");
     std::copy(rhs.data(), rhs.data() + n, static_cast<double*>(B->x));
     cholmod_dense* X = cholmod_l_solve(CHOLMOD_A, factor_, B, &common_);
@@ -520,7 +521,9 @@ class PcgSolver final : public LinearSolver {
       : options_(options), preconditioner_(preconditioner) {}
 
   std::string name() const override {
-    return preconditioner_ == Preconditioner::Jacobi ? "cg" : preconditioner_ == Preconditioner::Aggregation ? "cg-agg" : "cg-ic";
+    return preconditioner_ == Preconditioner::Jacobi        ? "cg"
+           : preconditioner_ == Preconditioner::Aggregation ? "cg-agg"
+                                                            : "cg-ic";
   }
 
   void compute(const SparseMatrixD& A) override {
@@ -902,10 +905,10 @@ class LdltSolver final : public LinearSolver {
 /// the model came within a factor 2 of the measured factorisation from 1e8 to 4e11 flops, where one flop rate
 /// alone was off by up to 4x.
 struct CholmodRate {
-  double seconds_per_flop = 0.0;    ///< dense factorisation
-  double seconds_per_entry = 0.0;   ///< per entry of the supernodal factor, beyond the flops
-  double solve_per_entry = 0.0;     ///< one forward + backward substitution, per entry of the factor
-  double calibration_seconds = 0.0; ///< what measuring took
+  double seconds_per_flop = 0.0;     ///< dense factorisation
+  double seconds_per_entry = 0.0;    ///< per entry of the supernodal factor, beyond the flops
+  double solve_per_entry = 0.0;      ///< one forward + backward substitution, per entry of the factor
+  double calibration_seconds = 0.0;  ///< what measuring took
 
   double factorize_seconds(double flops, double entries) const {
     return flops * seconds_per_flop + entries * seconds_per_entry;
@@ -1202,9 +1205,7 @@ class AutoSolver final : public LinearSolver {
 
 }  // namespace
 
-std::vector<std::string> solver_names() {
-  return {"cholmod", "cg", "cg-ic", "cg-agg", "gauss-seidel", "ldlt", "auto"};
-}
+std::vector<std::string> solver_names() { return {"cholmod", "cg", "cg-ic", "cg-agg", "gauss-seidel", "ldlt", "auto"}; }
 
 std::unique_ptr<LinearSolver> make_solver(const std::string& name, const SolveOptions& options) {
   if (name == "cholmod") return std::make_unique<CholmodSolver>();

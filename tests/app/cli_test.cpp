@@ -139,7 +139,7 @@ TEST_F(Cli, DemoWritesEveryOutput) {
   const nlohmann::json report = nlohmann::json::parse(std::ifstream(out / "report.json"));
   for (const char* key : {"vertices", "tets", "target_vertices", "target_triangles"})
     EXPECT_GT(report["counts"][key].get<std::int64_t>(), 0) << key;
-  EXPECT_EQ(report["solver"]["name"], "cg");
+  EXPECT_EQ(report["solver"]["name"], "cg-agg");
   EXPECT_TRUE(report["transport"].contains("fallbacks"));
   EXPECT_GT(report["peak_memory_bytes"].get<std::int64_t>(), 0);
   // labels.txt has one line per vertex of target.obj.

@@ -187,7 +187,8 @@ INSTANTIATE_TEST_SUITE_P(LinearSolverBackends, LinearSolverBackend, ::testing::V
                          });
 
 TEST(LinearSolver, NamesAndUnknownName) {
-  EXPECT_EQ(solver_names(), (std::vector<std::string>{"cholmod", "cg", "cg-ic", "cg-agg", "gauss-seidel", "ldlt", "auto"}));
+  EXPECT_EQ(solver_names(),
+            (std::vector<std::string>{"cholmod", "cg", "cg-ic", "cg-agg", "gauss-seidel", "ldlt", "auto"}));
   for (const auto& name : solver_names()) EXPECT_EQ(make_solver(name)->name(), name);
   for (const std::string bad : {"x", "", "CG", "cg ", "gauss_seidel"}) {
     try {
