@@ -18,6 +18,11 @@ void add_pipeline_options(CLI::App& cmd, PipelineOptions& o) {
                  "Length of one unit of morph time in R^4 (c); 0 = time-steps x voxel size (cubic cells)")
       ->check(CLI::NonNegativeNumber)
       ->capture_default_str();
+  cmd.add_option("--zero-snap", o.extract.zero_snap,
+                 "Lattice values within this many voxels of zero move to +-it, keeping crossings (and the slivers they "
+                 "make) off lattice points")
+      ->check(CLI::Range(0.0, 0.45))
+      ->capture_default_str();
   const auto names = solver_names();
   cmd.add_option("--solver", o.laplace.solver, "Laplace solver backend")
       ->check(CLI::IsMember(names))
@@ -33,10 +38,29 @@ void add_pipeline_options(CLI::App& cmd, PipelineOptions& o) {
                  "none: meshes in their own coordinates; bbox: both normalised, outputs in the target's")
       ->check(CLI::IsMember({"none", "bbox"}))
       ->capture_default_str();
+  cmd.add_option("--method", o.method,
+                 "How B and the slices find their preimages on A: trace (exact characteristics of grad s), upwind (the "
+                 "paper's label propagation) or closest-point (no morph, the baseline)")
+      ->check(CLI::IsMember({"trace", "upwind", "closest-point"}))
+      ->capture_default_str();
+  cmd.add_option("--trace-step", o.trace.step_variation,
+                 "Characteristic tracing: largest change of the interpolated field over one Runge-Kutta step, "
+                 "relative to its size")
+      ->check(CLI::PositiveNumber)
+      ->capture_default_str();
+  cmd.add_option("--trace-smoothing", o.trace.field_smoothing,
+                 "Characteristic tracing: passes of neighbour averaging of the flow field before tracing")
+      ->check(CLI::Range(0, 100))
+      ->capture_default_str();
   cmd.add_option("--compare-solvers", o.compare_solvers,
                  "Also solve the same system with these backends and report each (Table II's diffusion column)")
       ->check(CLI::IsMember(names))
       ->delimiter(',');
+  cmd.add_option("--seams", o.seams_mode,
+                 "Split output triangles along seams: all, topological, texture or none (outputs keep the extracted "
+                 "connectivity)")
+      ->check(CLI::IsMember({"all", "topological", "texture", "none"}))
+      ->capture_default_str();
   cmd.add_flag("--ply", o.write_ply, "Also write target.ply");
   cmd.add_option("--threads", o.threads, "Worker threads (0 = all cores)")->check(CLI::NonNegativeNumber);
   cmd.add_option_function<std::string>(

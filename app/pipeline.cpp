@@ -2,8 +2,8 @@
 // written, and outputs are staged and renamed into place, so a failed run leaves nothing behind.
 #include "app/pipeline.h"
 
-#include <tbb/global_control.h>
 #include <sys/resource.h>
+#include <tbb/global_control.h>
 #include <unistd.h>
 
 #include <chrono>
@@ -22,23 +22,20 @@
 #include "io/mesh_io.h"
 #include "io/output_dir.h"
 #include "mesh/errors.h"
-#include "mesh/stopwatch.h"
 #include "mesh/quality.h"
 #include "mesh/shapes.h"
+#include "mesh/stopwatch.h"
 #include "mesh/transfer.h"
 #include "solver/gradient.h"
 
 namespace morphmap {
 namespace {
 
-
 // Similarity x -> (x - center) / scale that brings a surface into the common morph frame.
 struct Frame {
   Eigen::Vector3d center = Eigen::Vector3d::Zero();
   double scale = 1.0;
-  Eigen::MatrixXd to_world(const Eigen::MatrixXd& P) const {
-    return (P * scale).rowwise() + center.transpose();
-  }
+  Eigen::MatrixXd to_world(const Eigen::MatrixXd& P) const { return (P * scale).rowwise() + center.transpose(); }
 };
 
 Frame normalise(Surface& surface) {
@@ -54,8 +51,11 @@ class Progress {
  public:
   explicit Progress(bool enabled) : enabled_(enabled), start_(Clock::now()) {}
   void stage(const std::string& name, double seconds) const {
-    if (enabled_) std::fprintf(stderr, "[morphmap] %-10s %8.3f s  (elapsed %.1f s)\n", name.c_str(), seconds, seconds_since(start_));
+    if (enabled_)
+      std::fprintf(stderr, "[morphmap] %-10s %8.3f s  (elapsed %.1f s)\n", name.c_str(), seconds,
+                   seconds_since(start_));
   }
+
  private:
   bool enabled_;
   Clock::time_point start_;
@@ -85,7 +85,8 @@ void write_labels(const std::string& path, const Eigen::MatrixXd& labels) {
   std::ofstream out(path);
   if (!out) throw IoError(path + ": cannot open for writing");
   out << std::setprecision(17);
-  for (Eigen::Index i = 0; i < labels.rows(); ++i) out << labels(i, 0) << ' ' << labels(i, 1) << ' ' << labels(i, 2) << '\n';
+  for (Eigen::Index i = 0; i < labels.rows(); ++i)
+    out << labels(i, 0) << ' ' << labels(i, 1) << ' ' << labels(i, 2) << '\n';
   if (!out) throw IoError(path + ": write failed");
 }
 
@@ -119,22 +120,26 @@ long long parse_memory_size(const std::string& text) {
   }
   const std::string unit = text.substr(used);
   double scale = 1.0;
-  if (unit == "K" || unit == "k") scale = 1024.0;
-  else if (unit == "M" || unit == "m") scale = 1024.0 * 1024.0;
-  else if (unit == "G" || unit == "g") scale = kGiB;
-  else if (unit == "T" || unit == "t") scale = 1024.0 * kGiB;
-  else if (!unit.empty()) throw InvalidInput("--max-memory: unknown unit in '" + text + "' (use K, M, G or T)");
-  if (!(value > 0.0) || !std::isfinite(value)) throw InvalidInput("--max-memory: '" + text + "' is not a positive size");
+  if (unit == "K" || unit == "k")
+    scale = 1024.0;
+  else if (unit == "M" || unit == "m")
+    scale = 1024.0 * 1024.0;
+  else if (unit == "G" || unit == "g")
+    scale = kGiB;
+  else if (unit == "T" || unit == "t")
+    scale = 1024.0 * kGiB;
+  else if (!unit.empty())
+    throw InvalidInput("--max-memory: unknown unit in '" + text + "' (use K, M, G or T)");
+  if (!(value > 0.0) || !std::isfinite(value))
+    throw InvalidInput("--max-memory: '" + text + "' is not a positive size");
   return (long long)(value * scale);
 }
 
 std::string stretch_json(const StretchResult& r) {
-  const nlohmann::json j = {{"triangles", r.triangles},       {"measured", r.measured},
-                            {"min_compression", r.min_sigma2}, {"max_stretch", r.max_sigma1},
-                            {"mean_l2", r.mean_l2},           {"variance_l2", r.variance_l2},
-                            {"sander_l2", r.sander_l2},       {"folded", r.folded},
-                            {"collapsed", r.collapsed},       {"coverage", r.coverage},
-                            {"area_source", r.area_a},        {"area_target", r.area_b}};
+  const nlohmann::json j = {{"triangles", r.triangles},    {"measured", r.measured},  {"min_compression", r.min_sigma2},
+                            {"max_stretch", r.max_sigma1}, {"mean_l2", r.mean_l2},    {"variance_l2", r.variance_l2},
+                            {"sander_l2", r.sander_l2},    {"folded", r.folded},      {"collapsed", r.collapsed},
+                            {"coverage", r.coverage},      {"area_source", r.area_a}, {"area_target", r.area_b}};
   return j.dump(2);
 }
 
@@ -234,6 +239,11 @@ PipelineResult run_pipeline(const PipelineOptions& options) {
   if (options.threads > 0) threads.emplace(tbb::global_control::max_allowed_parallelism, std::size_t(options.threads));
   if (options.align != "none" && options.align != "bbox")
     throw InvalidInput("--align: unknown value '" + options.align + "' (choose none, bbox)");
+  if (options.seams_mode != "all" && options.seams_mode != "topological" && options.seams_mode != "texture" &&
+      options.seams_mode != "none")
+    throw InvalidInput("--seams: unknown value '" + options.seams_mode + "' (choose all, topological, texture, none)");
+  if (options.method != "trace" && options.method != "upwind" && options.method != "closest-point")
+    throw InvalidInput("--method: unknown value '" + options.method + "' (choose trace, upwind, closest-point)");
   for (double t : options.slices)
     if (!(t > 0.0 && t < 1.0)) throw InvalidInput("--slices: time " + format_time(t) + " is not in (0, 1)");
   (void)make_solver(options.laplace.solver, options.laplace.solve);  // rejects an unknown backend before any work
@@ -264,8 +274,9 @@ PipelineResult run_pipeline(const PipelineOptions& options) {
     memory_estimate = estimate_peak_memory(morph.lattice_points, tets, vertices);
     if (options.max_memory_bytes > 0 && memory_estimate > options.max_memory_bytes)
       throw InvalidInput("--max-memory: this run needs about " + gib(double(memory_estimate)) + " (" +
-                         std::to_string(tets) + " tets, " + std::to_string(vertices) + " vertices), over the limit of " +
-                         gib(double(options.max_memory_bytes)) + "; lower --voxels or --time-steps");
+                         std::to_string(tets) + " tets, " + std::to_string(vertices) +
+                         " vertices), over the limit of " + gib(double(options.max_memory_bytes)) +
+                         "; lower --voxels or --time-steps");
   };
   ExtractResult extract = extract_hypersurface(morph.field, extract_options);
   seconds["extract"] = extract.seconds;
@@ -276,33 +287,97 @@ PipelineResult run_pipeline(const PipelineOptions& options) {
   seconds["quality"] = quality.seconds;
   progress.stage("quality", quality.seconds);
 
-  const LaplaceResult laplace = solve_harmonic(mesh, options.laplace);
-  seconds["laplace"] = laplace.seconds;
-  progress.stage("laplace", laplace.seconds);
+  const bool closest_point = options.method == "closest-point";
+  LaplaceResult laplace;
+  if (!closest_point) {
+    laplace = solve_harmonic(mesh, options.laplace);
+    seconds["laplace"] = laplace.seconds;
+    progress.stage("laplace", laplace.seconds);
+  } else {
+    laplace.s = Eigen::VectorXd::Zero(mesh.vertex_count());
+  }
 
-  const SolverComparisonResult comparison =
-      compare_solvers(mesh, laplace.s, options.compare_solvers, options.laplace);
-  if (!options.compare_solvers.empty()) {
+  SolverComparisonResult comparison;
+  if (!options.compare_solvers.empty() && !closest_point) {
+    comparison = compare_solvers(mesh, laplace.s, options.compare_solvers, options.laplace);
     seconds["compare"] = comparison.seconds;
     progress.stage("compare", comparison.seconds);
   }
 
-  const GradientResult gradient = compute_gradient(mesh, laplace.s);
-  seconds["gradient"] = gradient.seconds;
-  progress.stage("gradient", gradient.seconds);
-
   start = Clock::now();
   const SurfaceLocator locator(A);
   const double locator_seconds = seconds_since(start);
-  const TransportResult transport = transport_labels(
-      mesh, laplace.s, gradient.vertex_field, [&](const Eigen::Vector3d& x) { return locator.closest(x).point; },
-      options.transport);
-  seconds["transport"] = transport.seconds;
-  progress.stage("transport", transport.seconds);
+  TransportResult transport;
+  GradientResult gradient;
+  if (!closest_point) {
+    gradient = compute_gradient(mesh, laplace.s);
+    seconds["gradient"] = gradient.seconds;
+    progress.stage("gradient", gradient.seconds);
+    transport = transport_labels(
+        mesh, laplace.s, gradient.vertex_field, [&](const Eigen::Vector3d& x) { return locator.closest(x).point; },
+        options.transport);
+    seconds["transport"] = transport.seconds;
+    progress.stage("transport", transport.seconds);
+  } else {
+    // The closest-point baseline labels every mesh vertex with its own position (its closest point on A is
+    // taken below, like every label's); the seams then see that map's jumps.
+    transport.labels = mesh.V.leftCols(3);
+  }
+
+  // Characteristics traced back from the vertices of B and of every slice replace their interpolated labels,
+  // and those from the vertices of the tets these surfaces cut replace the upwind labels there, which the seam
+  // split reads (so seams are cut where the traced map jumps). A trace that stalls (where T vanishes, e.g. a
+  // component born mid-morph) keeps the upwind label at the point where it stopped.
+  TraceResult traced_total;
+  Eigen::MatrixXd mesh_labels;  // #mesh.V by 3: upwind labels, traced ones at the vertices of cut tets
+  std::vector<char> vertex_traced;
+  if (options.method == "trace") {
+    mesh_labels = transport.labels;
+    vertex_traced.assign(std::size_t(mesh.vertex_count()), 0);
+  }
+  const Eigen::MatrixXd& seam_labels = options.method == "trace" ? mesh_labels : transport.labels;
+  auto trace_labels = [&](SliceMesh& slice) {
+    if (options.method != "trace") return;
+    std::vector<MeshPoint> starts = edge_points(slice.source_edge, slice.edge_weight);
+    const std::size_t own = starts.size();
+    std::vector<int> vertices;
+    for (int t : slice.source_tet)
+      for (int k = 0; k < 4; ++k) {
+        const int v = mesh.T(t, k);
+        if (vertex_traced[std::size_t(v)]) continue;
+        vertex_traced[std::size_t(v)] = 1;
+        vertices.push_back(v);
+        MeshPoint p;
+        p.ids[0] = v;
+        p.weights[0] = 1.0;
+        starts.push_back(p);
+      }
+    const TraceResult traced = trace_to_source(mesh, gradient.vertex_field, starts, options.trace);
+    auto label_of = [&](std::size_t i) -> Eigen::RowVector3d {
+      if (traced.status[i] == TraceStatus::Reached) return traced.end.row(Eigen::Index(i));
+      Eigen::RowVector3d label = Eigen::RowVector3d::Zero();
+      const MeshPoint& p = traced.end_point[i];
+      for (int k = 0; k < 4; ++k)
+        if (p.ids[std::size_t(k)] >= 0)
+          label += p.weights[std::size_t(k)] * transport.labels.row(p.ids[std::size_t(k)]);
+      return label;
+    };
+    for (std::size_t i = 0; i < own; ++i) slice.labels.row(Eigen::Index(i)) = label_of(i);
+    for (std::size_t j = 0; j < vertices.size(); ++j) mesh_labels.row(vertices[j]) = label_of(own + j);
+    traced_total.reached += traced.reached;
+    traced_total.stalled += traced.stalled;
+    traced_total.invalid += traced.invalid;
+    traced_total.tet_pieces += traced.tet_pieces;
+    traced_total.face_pieces += traced.face_pieces;
+    traced_total.edge_pieces += traced.edge_pieces;
+    traced_total.max_pieces = std::max(traced_total.max_pieces, traced.max_pieces);
+    traced_total.seconds += traced.seconds;
+  };
 
   start = Clock::now();
   PipelineResult result;
   result.target = target_boundary(mesh, transport.labels);
+  trace_labels(result.target);
   const std::vector<SurfaceHit> hits = locator.closest_all(result.target.labels);
   seconds["map"] = seconds_since(start) + locator_seconds;
   const StretchResult stretch = measure_stretch(A, result.target.V, result.target.F, points_of(hits));
@@ -320,6 +395,7 @@ PipelineResult run_pipeline(const PipelineOptions& options) {
   std::vector<SliceOut> slices;
   for (double t : options.slices) {
     SliceOut s{t, slice_at(mesh, transport.labels, t), {}, {}};
+    trace_labels(s.mesh);
     if (A.has_uv()) s.uv = uv_at(A, locator.closest_all(s.mesh.labels));
     slices.push_back(std::move(s));
   }
@@ -328,8 +404,13 @@ PipelineResult run_pipeline(const PipelineOptions& options) {
 
   // Seams (§8): target.obj and the slices are written from the split meshes.
   start = Clock::now();
-  result.target_seams = split_seams(result.target, mesh, transport.labels, A, locator, options.seams);
-  for (SliceOut& s : slices) s.seams = split_seams(s.mesh, mesh, transport.labels, A, locator, options.seams);
+  SeamOptions seam_options = options.seams;
+  if (options.seams_mode != "all") {
+    seam_options.topological = options.seams_mode == "topological";
+    seam_options.texture = options.seams_mode == "texture";
+  }
+  result.target_seams = split_seams(result.target, mesh, seam_labels, A, locator, seam_options);
+  for (SliceOut& s : slices) s.seams = split_seams(s.mesh, mesh, seam_labels, A, locator, seam_options);
   const Eigen::MatrixXd seam_preimages = frame_a.to_world(points_of(locator.closest_all(result.target_seams.labels)));
   seconds["seams"] = seconds_since(start);
   progress.stage("seams", seconds["seams"]);
@@ -340,7 +421,8 @@ PipelineResult run_pipeline(const PipelineOptions& options) {
     std::vector<Surface> panels;
     panels.push_back(A);
     std::shared_ptr<const RgbImage> texture = A.texture;
-    if (!texture && A.has_uv() && A.has_texture()) texture = std::make_shared<const RgbImage>(read_image(A.texture_path));
+    if (!texture && A.has_uv() && A.has_texture())
+      texture = std::make_shared<const RgbImage>(read_image(A.texture_path));
     // The seam-split meshes with their per-corner UVs, exactly what target.obj and the slices hold.
     auto panel = [&](const SeamResult& seams, const std::string& name) {
       Surface p;
@@ -387,6 +469,7 @@ PipelineResult run_pipeline(const PipelineOptions& options) {
                        {"max_iterations", options.laplace.solve.max_iterations},
                        {"warm_start", options.laplace.warm_start},
                        {"align", options.align},
+                       {"method", options.method},
                        {"slices", options.slices},
                        {"threads", options.threads},
                        {"max_memory_bytes", options.max_memory_bytes},
@@ -422,7 +505,7 @@ PipelineResult run_pipeline(const PipelineOptions& options) {
       {"min_volume_ratio", quality.min_volume_ratio},
       {"dihedral_histogram_10deg", quality.dihedral_histogram}};
   report["stretch"] = nlohmann::json::parse(stretch_json(stretch));
-  report["seams"] = seams_json(result.target_seams, options.seams);
+  report["seams"] = seams_json(result.target_seams, seam_options);
   report["solver"] = {{"name", laplace.report.backend},
                       {"iterations", laplace.report.iterations},
                       {"residual", laplace.report.residual},
@@ -449,6 +532,16 @@ PipelineResult run_pipeline(const PipelineOptions& options) {
                         {"max_difference", c.max_difference}});
     report["compare"] = {{"assemble_seconds", comparison.assemble_seconds}, {"solves", solves}};
   }
+  report["trace"] = {{"method", options.method},
+                     {"reached", traced_total.reached},
+                     {"stalled", traced_total.stalled},
+                     {"invalid", traced_total.invalid},
+                     {"tet_pieces", traced_total.tet_pieces},
+                     {"face_pieces", traced_total.face_pieces},
+                     {"edge_pieces", traced_total.edge_pieces},
+                     {"max_pieces", traced_total.max_pieces},
+                     {"seconds", traced_total.seconds},
+                     {"fallback", "a stalled trace takes the upwind label interpolated where it stopped"}};
   report["transport"] = {{"fallbacks", transport.fallbacks()},
                          {"upwind_exact", transport.upwind_exact},
                          {"fallback_projected", transport.fallback_projected},
@@ -494,7 +587,7 @@ PipelineResult run_pipeline(const PipelineOptions& options) {
                               {"file", name},
                               {"vertices", s.seams.V.rows()},
                               {"triangles", s.seams.F.rows()},
-                              {"seams", seams_json(s.seams, options.seams)}});
+                              {"seams", seams_json(s.seams, seam_options)}});
     }
     report["slices"] = slice_report;
     if (contact_sheet) write_png(out->staged("contact_sheet.png"), *contact_sheet);

@@ -12,40 +12,49 @@
 #include "mesh/seams.h"
 #include "mesh/slice.h"
 #include "solver/laplace.h"
+#include "solver/trace.h"
 #include "solver/transport.h"
 
 namespace morphmap {
 
 struct PipelineOptions {
-  std::string source;              ///< mesh file or built-in shape spec (see mesh/shapes.h)
-  std::string target;              ///< mesh file or built-in shape spec
-  std::string output_dir;          ///< outputs go here (created if missing); empty = compute only
-  std::string align = "none";      ///< "none": meshes in their own coordinates; "bbox": both normalised to a unit box
-  MorphOptions morph;              ///< lattice resolution
-  ExtractOptions extract;          ///< time steps, time scale
-  LaplaceOptions laplace;          ///< solver backend and tolerance
+  std::string source;          ///< mesh file or built-in shape spec (see mesh/shapes.h)
+  std::string target;          ///< mesh file or built-in shape spec
+  std::string output_dir;      ///< outputs go here (created if missing); empty = compute only
+  std::string align = "none";  ///< "none": meshes in their own coordinates; "bbox": both normalised to a unit box
+  MorphOptions morph;          ///< lattice resolution
+  ExtractOptions extract;      ///< time steps, time scale
+  LaplaceOptions laplace;      ///< solver backend and tolerance
   std::vector<std::string> compare_solvers;  ///< backends also run on the same system, reported under "compare"
                                              ///< in report.json (the map uses laplace.solver only)
-  TransportOptions transport;      ///< upwind sweep tolerances
+  /// How B and the slices get their preimages on A: "trace" follows each vertex's characteristic of grad s back
+  /// to A exactly (solver/trace.h); "upwind" reads the paper's label propagation (§7, solver/transport.h);
+  /// "closest-point" maps every vertex to its closest point of A (no morph: the baseline other tools use).
+  std::string method = "trace";
+  TransportOptions transport;      ///< upwind sweep tolerances (the sweep also labels the 4D mesh for seams)
+  TraceOptions trace;              ///< characteristic tracing tolerances
   SeamOptions seams;               ///< topological and texture seam splitting of target.obj and slices (§8)
+  std::string seams_mode = "all";  ///< "all", "topological", "texture" or "none": overrides seams.topological/texture
   std::vector<double> slices;      ///< morph times in (0, 1) at which to write slice_<t>.obj
   bool write_ply = false;          ///< also write target.ply
   int threads = 0;                 ///< worker threads; 0 = all cores
-  long long max_memory_bytes = 0;  ///< refuse (InvalidInput) a run whose estimated peak memory exceeds this; 0 = no limit
-  bool progress = false;           ///< print stage names and times to stderr
-  bool render = false;             ///< write contact_sheet.png (A, the slices, B with one camera) into output_dir
-  RenderOptions render_options;    ///< size and camera of each contact sheet panel
+  long long max_memory_bytes =
+      0;                         ///< refuse (InvalidInput) a run whose estimated peak memory exceeds this; 0 = no limit
+  bool progress = false;         ///< print stage names and times to stderr
+  bool render = false;           ///< write contact_sheet.png (A, the slices, B with one camera) into output_dir
+  RenderOptions render_options;  ///< size and camera of each contact sheet panel
 };
 
 struct PipelineResult {
-  std::string report_json;          ///< the report.json text (also written to output_dir)
-  SliceMesh target;                 ///< B as extracted (t = 1 boundary): V in B's coordinates, labels raw (morph frame)
-  Eigen::MatrixXd target_labels;    ///< #target.V by 3: preimage on A (closest point of A to the raw label), A's coordinates
-  Eigen::MatrixXd target_uv;        ///< #target.V by 2 texture coordinates; empty when A has no UVs
-  SeamResult target_seams;          ///< B split along seams (what target.obj holds), V and labels in the morph frame
-  std::int64_t mesh_vertices = 0;   ///< vertices of the 4D tet mesh
+  std::string report_json;  ///< the report.json text (also written to output_dir)
+  SliceMesh target;         ///< B as extracted (t = 1 boundary): V in B's coordinates, labels raw (morph frame)
+  Eigen::MatrixXd
+      target_labels;          ///< #target.V by 3: preimage on A (closest point of A to the raw label), A's coordinates
+  Eigen::MatrixXd target_uv;  ///< #target.V by 2 texture coordinates; empty when A has no UVs
+  SeamResult target_seams;    ///< B split along seams (what target.obj holds), V and labels in the morph frame
+  std::int64_t mesh_vertices = 0;  ///< vertices of the 4D tet mesh
   std::int64_t mesh_tets = 0;
-  std::int64_t fallbacks = 0;       ///< transport fallbacks
+  std::int64_t fallbacks = 0;  ///< transport fallbacks
 };
 
 /// Estimated peak resident memory of a whole run (bytes) from the lattice size and the exact mesh counts

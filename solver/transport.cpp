@@ -17,31 +17,12 @@
 #include <string>
 #include <vector>
 
+#include "mesh/adjacency.h"
 #include "mesh/errors.h"
 
 namespace morphmap {
 
 namespace {
-
-// Vertex -> incident tets in compressed rows; tets of a vertex are in increasing tet index, so the
-// choice among equally good tets is deterministic.
-struct VertexTets {
-  std::vector<std::int64_t> offset;
-  std::vector<int> tets;
-};
-
-VertexTets build_vertex_tets(const TetIndices& T, Eigen::Index vertex_count) {
-  VertexTets adj;
-  adj.offset.assign(static_cast<std::size_t>(vertex_count) + 1, 0);
-  for (Eigen::Index t = 0; t < T.rows(); ++t)
-    for (int k = 0; k < 4; ++k) ++adj.offset[static_cast<std::size_t>(T(t, k)) + 1];
-  for (std::size_t i = 1; i < adj.offset.size(); ++i) adj.offset[i] += adj.offset[i - 1];
-  adj.tets.resize(static_cast<std::size_t>(adj.offset.back()));
-  std::vector<std::int64_t> fill(adj.offset.begin(), adj.offset.end() - 1);
-  for (Eigen::Index t = 0; t < T.rows(); ++t)
-    for (int k = 0; k < 4; ++k) adj.tets[static_cast<std::size_t>(fill[static_cast<std::size_t>(T(t, k))]++)] = int(t);
-  return adj;
-}
 
 // The space a vertex's star is projected into: the star's tangent 3-space (with an orthonormal basis),
 // or, for a folded star, all of R^4 (each tet's own hull is used).
@@ -91,17 +72,17 @@ class Sweep {
       tbb::parallel_for(tbb::blocked_range<Eigen::Index>(0, mesh.tet_count()), [&](const auto& r) {
         for (Eigen::Index t = r.begin(); t != r.end(); ++t) {
           const Eigen::Vector4d v0 = mesh.V.row(mesh.T(t, 0)).transpose();
-          tet_normal_[std::size_t(t)] = cross4(mesh.V.row(mesh.T(t, 1)).transpose() - v0,
-                                               mesh.V.row(mesh.T(t, 2)).transpose() - v0,
-                                               mesh.V.row(mesh.T(t, 3)).transpose() - v0);
+          tet_normal_[std::size_t(t)] =
+              cross4(mesh.V.row(mesh.T(t, 1)).transpose() - v0, mesh.V.row(mesh.T(t, 2)).transpose() - v0,
+                     mesh.V.row(mesh.T(t, 3)).transpose() - v0);
         }
       });
     }
   }
 
-  std::int64_t first(int v) const { return adj_.offset[std::size_t(v)]; }
-  std::int64_t last(int v) const { return adj_.offset[std::size_t(v) + 1]; }
-  int tet(std::int64_t j) const { return adj_.tets[std::size_t(j)]; }
+  std::int64_t first(int v) const { return adj_.first(v); }
+  std::int64_t last(int v) const { return adj_.last(v); }
+  int tet(std::int64_t j) const { return adj_.tet(j); }
 
   // Projection onto the star's tangent space (paper §7.1): per-tet hulls of a bent star leave gaps
   // between their cones where -T fits no tet; one common projection makes the projected tets tile.
@@ -131,8 +112,7 @@ class Sweep {
   }
 
   // The three vertices of tet t other than v, and the projected edge matrix from v to them.
-  bool opposite(int v, int t, const Frame& frame, std::array<int, 3>& ids,
-                Eigen::Matrix<double, 4, 3>& E) const {
+  bool opposite(int v, int t, const Frame& frame, std::array<int, 3>& ids, Eigen::Matrix<double, 4, 3>& E) const {
     int n = 0;
     for (int k = 0; k < 4; ++k)
       if (mesh_.T(t, k) != v && n < 3) ids[std::size_t(n++)] = mesh_.T(t, k);
@@ -218,11 +198,10 @@ TransportResult transport_labels(const TetMesh4& mesh, const Eigen::VectorXd& s,
                                  const TransportOptions& options) {
   if (mesh.V.cols() != 4) throw InvalidInput("transport_labels: mesh.V must be #V by 4");
   const Eigen::MatrixXd positions = mesh.V.leftCols(3);
-  return transport_values(mesh, s, vertex_field, positions,
-                          [&](const Eigen::Vector3d& x) -> Eigen::RowVectorXd {
-                            return (unreached ? unreached(x) : x).transpose();
-                          },
-                          options);
+  return transport_values(
+      mesh, s, vertex_field, positions,
+      [&](const Eigen::Vector3d& x) -> Eigen::RowVectorXd { return (unreached ? unreached(x) : x).transpose(); },
+      options);
 }
 
 TransportResult transport_values(const TetMesh4& mesh, const Eigen::VectorXd& s, const Eigen::MatrixXd& vertex_field,
@@ -413,10 +392,18 @@ TransportResult transport_values(const TetMesh4& mesh, const Eigen::VectorXd& s,
   for (Eigen::Index v = 0; v < nv; ++v) {
     if (mesh.side[std::size_t(v)] == VertexSide::A) continue;
     switch (kind[std::size_t(v)]) {
-      case kExact: ++result.upwind_exact; break;
-      case kProjected: ++result.fallback_projected; break;
-      case kNeighbours: ++result.fallback_neighbours; break;
-      case kUnreached: ++result.fallback_unreached; break;
+      case kExact:
+        ++result.upwind_exact;
+        break;
+      case kProjected:
+        ++result.fallback_projected;
+        break;
+      case kNeighbours:
+        ++result.fallback_neighbours;
+        break;
+      case kUnreached:
+        ++result.fallback_unreached;
+        break;
     }
   }
   result.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();

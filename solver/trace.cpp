@@ -1,0 +1,467 @@
+// Characteristics of the interpolated flow T (see trace.h; paper §7). Written by hand: no library traces a
+// vector field over a simplicial 3-manifold in R^4.
+//
+// In a simplex with vertices v_0..v_k (k = 1, 2, 3: an edge, a face, a tet) and barycentric weights w, moving
+// along d = -sum_j w_j T_j (projected into the simplex's span) changes the weights at the rates
+//   dw_i/dtau = grad w_i . d = -sum_j (grad w_i . T_j) w_j = -(A w)_i,
+// a linear ODE. The weight gradients come from E = [v_1 - v_0 .. v_k - v_0] (4 by k): grad w_i = E (E^T E)^-1 e_i
+// for i >= 1 and grad w_0 = -(their sum), so no embedding of the hull is needed. A piece ends where the first
+// weight reaches zero, on a face of the simplex, where the next simplex is chosen.
+#include "solver/trace.h"
+
+#include <tbb/blocked_range.h>
+#include <tbb/parallel_for.h>
+
+#include <Eigen/Dense>
+#include <algorithm>
+#include <chrono>
+#include <cstdio>
+#include <cstdlib>
+#include <limits>
+#include <string>
+
+#include "mesh/adjacency.h"
+#include "mesh/errors.h"
+
+namespace morphmap {
+
+namespace {
+
+using Weights = Eigen::Vector4d;
+
+// A simplex (2 to 4 mesh vertices) with what its weight ODE needs: the gradients of its weights (in its span) and
+// the field and normals at its vertices.
+struct Simplex {
+  int size = 0;                                                         ///< vertices: 2 edge, 3 face, 4 tet
+  std::array<int, 4> ids{{-1, -1, -1, -1}};                             ///< mesh vertices
+  Eigen::Matrix<double, 4, 3> G = Eigen::Matrix<double, 4, 3>::Zero();  ///< grad w_1 .. grad w_(size-1)
+  Eigen::Matrix4d T = Eigen::Matrix4d::Zero();                          ///< columns: the field at the vertices
+  Eigen::Matrix4d N = Eigen::Matrix4d::Zero();                          ///< columns: vertex normals (tets only)
+  Eigen::Vector4d normal = Eigen::Vector4d::Zero();                     ///< the tet's own normal (tets only)
+  double variation = 0.0;                                               ///< bound on how fast the rates change with w
+};
+
+// Weight rates at w (#size entries, zero beyond). In a tet the flow d is moved into the tet's span along the
+// interpolated vertex normal N(w), not orthogonally: two tets sharing a face see the same N there, so the flow
+// that leaves one through the face enters the other (orthogonal projections of a bent star disagree near the
+// face, and sliver tets, whose spans are far from the manifold's tangent space, would bend every trace through
+// them). Where N lies nearly in the tet's span (a fold) the orthogonal projection is used.
+Weights rates(const Simplex& x, const Weights& w) {
+  const int k = x.size - 1;
+  Eigen::Vector4d v = -(x.T.leftCols(x.size) * w.head(x.size));
+  if (x.size == 4) {
+    const Eigen::Vector4d n = x.N * w;
+    const double along = x.normal.dot(n);
+    if (std::abs(along) > 0.2 * x.normal.norm() * n.norm()) v -= (x.normal.dot(v) / along) * n;
+  }
+  Weights r = Weights::Zero();
+  double sum = 0.0;
+  for (int i = 0; i < k; ++i) {
+    r(i + 1) = x.G.col(i).dot(v);
+    sum += r(i + 1);
+  }
+  r(0) = -sum;
+  return r;
+}
+
+template <int K>
+bool simplex_system(const TetMesh4& mesh, const Eigen::MatrixXd& field, const Eigen::MatrixXd& normals, Simplex& x) {
+  Eigen::Matrix<double, 4, K> E;
+  const Eigen::Vector4d v0 = mesh.V.row(x.ids[0]).transpose();
+  for (int j = 0; j < K; ++j) E.col(j) = mesh.V.row(x.ids[std::size_t(j) + 1]).transpose() - v0;
+  const Eigen::Matrix<double, K, K> gram = E.transpose() * E;
+  double scale = 1.0;
+  for (int j = 0; j < K; ++j) scale *= gram(j, j);
+  // Hadamard: det <= product of the diagonal, with equality for orthogonal edges. Far below it the simplex is
+  // flat, its weights have no gradient, and it is never entered.
+  if (!(gram.determinant() > 1e-20 * scale)) return false;
+  x.G.setZero();
+  x.G.leftCols(K) = E * gram.inverse();
+  double largest_gradient = 0.0, spread = 0.0;
+  for (int j = 0; j < K; ++j) largest_gradient = std::max(largest_gradient, x.G.col(j).norm());
+  for (int j = 0; j <= K; ++j) {
+    x.T.col(j) = field.row(x.ids[std::size_t(j)]).transpose();
+    spread = std::max(spread, (x.T.col(j) - x.T.col(0)).norm());
+  }
+  if (K == 3) {
+    x.normal = cross4(E.col(0), E.col(1), E.col(2));
+    for (int j = 0; j <= K; ++j) {
+      x.N.col(j) = normals.row(x.ids[std::size_t(j)]).transpose();
+      spread = std::max(spread, (x.N.col(j) - x.N.col(0)).norm());
+    }
+  }
+  x.variation = 2.0 * largest_gradient * spread;
+  return x.G.allFinite() && x.T.allFinite();
+}
+
+bool system_of(const TetMesh4& mesh, const Eigen::MatrixXd& field, const Eigen::MatrixXd& normals, Simplex& x) {
+  switch (x.size) {
+    case 2:
+      return simplex_system<1>(mesh, field, normals, x);
+    case 3:
+      return simplex_system<2>(mesh, field, normals, x);
+    case 4:
+      return simplex_system<3>(mesh, field, normals, x);
+    default:
+      return false;
+  }
+}
+
+// One classical Runge-Kutta step of the weight ODE.
+Weights rk4(const Simplex& x, const Weights& w, double h) {
+  const Weights k1 = rates(x, w);
+  const Weights k2 = rates(x, w + 0.5 * h * k1);
+  const Weights k3 = rates(x, w + 0.5 * h * k2);
+  const Weights k4 = rates(x, w + h * k3);
+  return w + (h / 6.0) * (k1 + 2.0 * k2 + 2.0 * k3 + k4);
+}
+
+// One pass of neighbour averaging of a #V by 4 field (see TraceOptions::field_smoothing): every vertex takes the
+// normalised mean of the unit vectors at itself and at the vertices of its star (each counted once per incident
+// tet, in star order, so the result does not depend on the thread count). Zero vectors stay zero.
+Eigen::MatrixXd smooth_field(const TetMesh4& mesh, const VertexTets& adj, const Eigen::MatrixXd& field) {
+  Eigen::MatrixXd out = Eigen::MatrixXd::Zero(field.rows(), 4);
+  tbb::parallel_for(tbb::blocked_range<Eigen::Index>(0, mesh.vertex_count()), [&](const auto& r) {
+    for (Eigen::Index v = r.begin(); v != r.end(); ++v) {
+      if (!(field.row(v).squaredNorm() > 0.0)) continue;
+      Eigen::RowVector4d sum = field.row(v);
+      for (std::int64_t j = adj.first(int(v)); j < adj.last(int(v)); ++j)
+        for (int k = 0; k < 4; ++k) sum += field.row(mesh.T(adj.tet(j), k));
+      const double length = sum.norm();
+      if (length > 0.0) out.row(v) = sum / length;
+    }
+  });
+  return out;
+}
+
+// Unit vertex normals of the 3-manifold: the sum of the incident tets' normals (each |cross4| = 6 x volume),
+// summed in the star's tet order, so the result does not depend on the thread count.
+Eigen::MatrixXd vertex_normals(const TetMesh4& mesh, const VertexTets& adj) {
+  Eigen::MatrixXd normals = Eigen::MatrixXd::Zero(mesh.vertex_count(), 4);
+  tbb::parallel_for(tbb::blocked_range<Eigen::Index>(0, mesh.vertex_count()), [&](const auto& r) {
+    for (Eigen::Index v = r.begin(); v != r.end(); ++v) {
+      Eigen::Vector4d sum = Eigen::Vector4d::Zero();
+      for (std::int64_t j = adj.first(int(v)); j < adj.last(int(v)); ++j) {
+        const int t = adj.tet(j);
+        const Eigen::Vector4d v0 = mesh.V.row(mesh.T(t, 0)).transpose();
+        sum += cross4(mesh.V.row(mesh.T(t, 1)).transpose() - v0, mesh.V.row(mesh.T(t, 2)).transpose() - v0,
+                      mesh.V.row(mesh.T(t, 3)).transpose() - v0);
+      }
+      const double length = sum.norm();
+      if (length > 0.0) normals.row(v) = (sum / length).transpose();
+    }
+  });
+  return normals;
+}
+
+struct Stats {
+  std::int64_t pieces[5] = {0, 0, 0, 0, 0};  // by simplex size
+  std::int64_t total() const { return pieces[2] + pieces[3] + pieces[4]; }
+};
+
+class Tracer {
+ public:
+  Tracer(const TetMesh4& mesh, const Eigen::MatrixXd& field, const TraceOptions& options)
+      : mesh_(mesh),
+        options_(options),
+        adj_(build_vertex_tets(mesh.T, mesh.vertex_count())),
+        normals_(vertex_normals(mesh, adj_)) {
+    field_ = field;
+    for (int pass = 0; pass < options.field_smoothing; ++pass) field_ = smooth_field(mesh, adj_, field_);
+  }
+
+  TraceStatus trace(const MeshPoint& start, MeshPoint& end, Stats& stats, bool debug_ = false) const {
+    // The support of the current point: vertices with positive weight.
+    std::array<int, 4> ids{{-1, -1, -1, -1}};
+    std::array<double, 4> w{{0.0, 0.0, 0.0, 0.0}};
+    int n = 0;
+    for (int k = 0; k < 4; ++k)
+      if (start.ids[std::size_t(k)] >= 0 && start.weights[std::size_t(k)] > options_.weight_epsilon) {
+        if (start.ids[std::size_t(k)] >= mesh_.vertex_count()) return TraceStatus::Invalid;
+        ids[std::size_t(n)] = start.ids[std::size_t(k)];
+        w[std::size_t(n++)] = start.weights[std::size_t(k)];
+      }
+    end = start;
+    if (n == 0 || !held(ids, n)) return TraceStatus::Invalid;
+    normalise(w, n);
+    for (int step = 0;; ++step) {
+      end = MeshPoint{};
+      for (int k = 0; k < n; ++k) {
+        end.ids[std::size_t(k)] = ids[std::size_t(k)];
+        end.weights[std::size_t(k)] = w[std::size_t(k)];
+      }
+      bool on_a = true;
+      for (int k = 0; k < n; ++k) on_a = on_a && mesh_.side[std::size_t(ids[std::size_t(k)])] == VertexSide::A;
+      if (on_a) return TraceStatus::Reached;
+      if (step >= options_.max_steps) return TraceStatus::Stalled;
+      Simplex piece;
+      Weights pw;
+      if (!choose(ids, w, n, piece, pw)) return TraceStatus::Stalled;
+      if (debug_) {
+        std::fprintf(stderr, "step %d size %d ids", step, piece.size);
+        for (int j = 0; j < piece.size; ++j) std::fprintf(stderr, " %d(%.4f)", piece.ids[std::size_t(j)], pw(j));
+      }
+      if (!integrate(piece, pw)) return TraceStatus::Stalled;
+      if (debug_) {
+        Eigen::Vector4d x = Eigen::Vector4d::Zero();
+        for (int j = 0; j < piece.size; ++j) x += pw(j) * mesh_.V.row(piece.ids[std::size_t(j)]).transpose();
+        std::fprintf(stderr, " -> (%.6f %.6f %.6f %.6f)\n", x(0), x(1), x(2), x(3));
+      }
+      ++stats.pieces[piece.size];
+      n = 0;
+      for (int j = 0; j < piece.size; ++j)
+        if (pw(j) > options_.weight_epsilon) {
+          ids[std::size_t(n)] = piece.ids[std::size_t(j)];
+          w[std::size_t(n++)] = pw(j);
+        }
+      if (n == 0) return TraceStatus::Stalled;
+      normalise(w, n);
+    }
+  }
+
+ private:
+  static void normalise(std::array<double, 4>& w, int n) {
+    double sum = 0.0;
+    for (int k = 0; k < n; ++k) sum += w[std::size_t(k)];
+    for (int k = 0; k < n; ++k) w[std::size_t(k)] /= sum;
+  }
+
+  bool contains(int t, int v) const {
+    for (int k = 0; k < 4; ++k)
+      if (mesh_.T(t, k) == v) return true;
+    return false;
+  }
+
+  bool held(const std::array<int, 4>& ids, int n) const {
+    for (std::int64_t j = adj_.first(ids[0]); j < adj_.last(ids[0]); ++j) {
+      bool all = true;
+      for (int k = 1; k < n && all; ++k) all = contains(adj_.tet(j), ids[std::size_t(k)]);
+      if (all) return true;
+    }
+    return false;
+  }
+
+  // Follows the weight ODE in x from pw until the first weight that was positive (or leaves zero) reaches zero.
+  // pw is #x.size weights (zero beyond). False when the flow stops inside x.
+  bool integrate(const Simplex& x, Weights& pw) const {
+    const int m = x.size;
+    // Weights that start at zero enter (choose() demands a positive rate), so they are not taken as leaving
+    // while they are still zero; a step too long for one of them to become positive is halved.
+    std::array<bool, 4> pinned{{false, false, false, false}};
+    for (int j = 0; j < m; ++j) pinned[std::size_t(j)] = pw(j) <= options_.weight_epsilon;
+    for (int sub = 0; sub < 64; ++sub) {
+      const Weights r = rates(x, pw);
+      double exit_time = std::numeric_limits<double>::infinity();
+      for (int j = 0; j < m; ++j)
+        if (!pinned[std::size_t(j)] && r(j) < 0.0) exit_time = std::min(exit_time, pw(j) / -r(j));
+      double h = exit_time * 1.25;  // overshoot, so that the exit falls inside the step
+      if (x.variation > 0.0) h = std::min(h, options_.step_variation / x.variation);
+      if (!std::isfinite(h) || !(h > 0.0)) return false;
+      Weights next = rk4(x, pw, h);
+      for (int halve = 0; halve < 30; ++halve) {
+        bool pinned_negative = false;
+        for (int j = 0; j < m; ++j) pinned_negative = pinned_negative || (pinned[std::size_t(j)] && next(j) < 0.0);
+        if (!pinned_negative) break;
+        h *= 0.5;
+        next = rk4(x, pw, h);
+      }
+      pinned.fill(false);
+      // The first weight to cross zero within the step: its linear in-step estimate, refined by regula falsi
+      // on the RK4 solution.
+      double theta = 2.0;
+      int leaving = -1;
+      for (int j = 0; j < m; ++j)
+        if (next(j) < 0.0) {
+          const double t = pw(j) / (pw(j) - next(j));
+          if (t < theta) {
+            theta = t;
+            leaving = j;
+          }
+        }
+      if (leaving < 0) {
+        for (int j = 0; j < m; ++j) next(j) = std::max(next(j), 0.0);
+        pw = next / next.head(m).sum();
+        continue;
+      }
+      double lo = 0.0, hi = 1.0, w_lo = pw(leaving), w_hi = next(leaving);
+      Weights at = next;
+      for (int iteration = 0; iteration < 8; ++iteration) {
+        at = rk4(x, pw, theta * h);
+        const double value = at(leaving);
+        if (std::abs(value) <= 1e-13) break;
+        if (value > 0.0) {
+          lo = theta;
+          w_lo = value;
+        } else {
+          hi = theta;
+          w_hi = value;
+        }
+        theta = lo + (hi - lo) * w_lo / (w_lo - w_hi);
+      }
+      at(leaving) = 0.0;
+      for (int j = 0; j < m; ++j) at(j) = std::max(at(j), 0.0);
+      const double sum = at.head(m).sum();
+      if (!(sum > 0.0)) return false;
+      pw = at / sum;
+      return true;
+    }
+    return true;  // a long piece: continue from where it got to
+  }
+
+  // The simplex the point (support ids, weights w, n vertices) moves into: the tets holding the support, else
+  // their faces and edges; feasible when every weight outside the support grows and some weight of the support
+  // decreases. Tets move the flow along the vertex normal, so in a star that does not fold over its normal
+  // exactly one tet is feasible for a generic direction; otherwise the one whose velocity is best aligned with
+  // the flow wins, ties to the larger simplex, then to the first found (lowest tet index).
+  bool choose(const std::array<int, 4>& ids, const std::array<double, 4>& w, int n, Simplex& best,
+              Weights& best_w) const {
+    Eigen::Vector4d d = Eigen::Vector4d::Zero();
+    for (int k = 0; k < n; ++k) d -= w[std::size_t(k)] * field_.row(ids[std::size_t(k)]).transpose();
+    bool found = false;
+    double best_alignment = 0.0;
+    std::vector<std::array<int, 4>> seen;
+    const double d2 = d.squaredNorm();
+    if (!(d2 > 0.0)) return false;
+    int scan = ids[0];  // the support vertex with the fewest tets: every candidate holds it
+    for (int k = 1; k < n; ++k)
+      if (adj_.last(ids[std::size_t(k)]) - adj_.first(ids[std::size_t(k)]) < adj_.last(scan) - adj_.first(scan))
+        scan = ids[std::size_t(k)];
+    // Tets first; faces and edges together: their spans do not nest like a tet's and its faces', and the flow along
+    // an edge projects onto a skew face as a feasible but sideways direction.
+    for (int size = 4; size >= std::max(2, n) && !(found && size == 3); --size) {
+      seen.clear();
+      for (std::int64_t j = adj_.first(scan); j < adj_.last(scan); ++j) {
+        const int t = adj_.tet(j);
+        bool all = true;
+        for (int k = 0; k < n && all; ++k) all = ids[std::size_t(k)] == scan || contains(t, ids[std::size_t(k)]);
+        if (!all) continue;
+        std::array<int, 4> others{{-1, -1, -1, -1}};
+        int m = 0;
+        for (int k = 0; k < 4; ++k) {
+          const int v = mesh_.T(t, k);
+          if (std::find(ids.begin(), ids.begin() + n, v) == ids.begin() + n) others[std::size_t(m++)] = v;
+        }
+        const int extra = size - n;
+        if (extra < 0 || extra > m) continue;
+        for (int mask = 0; mask < (1 << m); ++mask) {  // subsets of `others` with `extra` members
+          if (__builtin_popcount(unsigned(mask)) != extra) continue;
+          Simplex x;
+          x.size = size;
+          for (int k = 0; k < n; ++k) x.ids[std::size_t(k)] = ids[std::size_t(k)];
+          int at = n;
+          for (int k = 0; k < m; ++k)
+            if (mask & (1 << k)) x.ids[std::size_t(at++)] = others[std::size_t(k)];
+          if (size < 4) {
+            std::array<int, 4> key = x.ids;
+            for (int i = 1; i < size; ++i)  // insertion sort of at most 3 ids
+              for (int j = i; j > 0 && key[std::size_t(j - 1)] > key[std::size_t(j)]; --j)
+                std::swap(key[std::size_t(j - 1)], key[std::size_t(j)]);
+            if (std::find(seen.begin(), seen.end(), key) != seen.end()) continue;
+            seen.push_back(key);
+          }
+          if (!system_of(mesh_, field_, normals_, x)) continue;
+          Weights xw = Weights::Zero();
+          for (int k = 0; k < n; ++k) xw(k) = w[std::size_t(k)];
+          const Weights r = rates(x, xw);
+          const double largest = r.head(size).cwiseAbs().maxCoeff();
+          bool feasible = largest > 0.0, moves = false;
+          for (int k = 0; k < size && feasible; ++k) {
+            // Outside the support a weight must grow: a rate near zero means the flow runs along a face of x,
+            // which the next class (that face itself) follows.
+            if (k >= n && r(k) <= options_.rate_tolerance * largest) feasible = false;
+            if (k < n && r(k) < 0.0) moves = true;
+          }
+          if (!feasible || !moves) continue;
+          // The projected flow sum_k r_k v_k (rates sum to zero), dotted with d, is its squared length: the
+          // fraction of the flow the simplex's span holds. A span that holds d only partly can still pass the
+          // feasibility test (the projection of a direction along an edge can point into a skew tet).
+          double alignment = 0.0;
+          for (int k = 0; k < size; ++k) alignment += r(k) * mesh_.V.row(x.ids[std::size_t(k)]).dot(d.transpose());
+          alignment /= d2;
+          if (!found || alignment > best_alignment + 1e-12) {
+            best = x;
+            best_w = xw;
+            best_alignment = alignment;
+            found = true;
+          }
+        }
+      }
+    }
+    return found;
+  }
+
+  const TetMesh4& mesh_;
+  const TraceOptions& options_;
+  Eigen::MatrixXd field_;  // #V by 4, smoothed
+  VertexTets adj_;
+  Eigen::MatrixXd normals_;  // #V by 4 unit vertex normals
+};
+
+}  // namespace
+
+std::vector<MeshPoint> edge_points(const Eigen::MatrixXi& edge, const Eigen::VectorXd& w) {
+  if (edge.cols() != 2 || edge.rows() != w.size()) throw InvalidInput("edge_points: edge must be #P by 2 and w #P");
+  std::vector<MeshPoint> points(static_cast<std::size_t>(edge.rows()));
+  for (Eigen::Index i = 0; i < edge.rows(); ++i) {
+    MeshPoint& p = points[std::size_t(i)];
+    if (edge(i, 0) == edge(i, 1)) {
+      p.ids[0] = edge(i, 0);
+      p.weights[0] = 1.0;
+    } else {
+      p.ids = {{edge(i, 0), edge(i, 1), -1, -1}};
+      p.weights = {{1.0 - w(i), w(i), 0.0, 0.0}};
+    }
+  }
+  return points;
+}
+
+TraceResult trace_to_source(const TetMesh4& mesh, const Eigen::MatrixXd& vertex_field,
+                            const std::vector<MeshPoint>& starts, const TraceOptions& options) {
+  const auto start_time = std::chrono::steady_clock::now();
+  const Eigen::Index nv = mesh.vertex_count();
+  if (vertex_field.rows() != nv || vertex_field.cols() != 4)
+    throw InvalidInput("trace_to_source: vertex_field must be #V by 4 (" + std::to_string(nv) + " vertices)");
+  if (mesh.side.size() != std::size_t(nv)) throw InvalidInput("trace_to_source: mesh.side must have #V entries");
+  if (!vertex_field.allFinite()) throw InvalidInput("trace_to_source: vertex_field is not finite");
+  const Tracer tracer(mesh, vertex_field, options);
+  const std::size_t count = starts.size();
+  TraceResult result;
+  result.end = Eigen::MatrixXd::Zero(Eigen::Index(count), 3);
+  result.end_point.resize(count);
+  result.status.resize(count);
+  std::vector<Stats> stats(count);
+  tbb::parallel_for(tbb::blocked_range<std::size_t>(0, count, 16), [&](const auto& r) {
+    for (std::size_t i = r.begin(); i != r.end(); ++i) {
+      MeshPoint& end = result.end_point[i];
+      static const char* dbg = std::getenv("MORPHMAP_TRACE_DEBUG");
+      result.status[i] = tracer.trace(starts[i], end, stats[i], dbg && std::size_t(std::atoi(dbg)) == i);
+      Eigen::Vector3d x = Eigen::Vector3d::Zero();
+      for (int k = 0; k < 4; ++k)
+        if (end.ids[std::size_t(k)] >= 0 && end.ids[std::size_t(k)] < nv)
+          x += end.weights[std::size_t(k)] * mesh.V.row(end.ids[std::size_t(k)]).head<3>().transpose();
+      result.end.row(Eigen::Index(i)) = x.transpose();
+    }
+  });
+  // Serial sums in start order: the same figures for any thread count.
+  for (std::size_t i = 0; i < count; ++i) {
+    switch (result.status[i]) {
+      case TraceStatus::Reached:
+        ++result.reached;
+        break;
+      case TraceStatus::Stalled:
+        ++result.stalled;
+        break;
+      case TraceStatus::Invalid:
+        ++result.invalid;
+        break;
+    }
+    result.edge_pieces += stats[i].pieces[2];
+    result.face_pieces += stats[i].pieces[3];
+    result.tet_pieces += stats[i].pieces[4];
+    result.max_pieces = std::max(result.max_pieces, stats[i].total());
+  }
+  result.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - start_time).count();
+  return result;
+}
+
+}  // namespace morphmap
