@@ -38,6 +38,10 @@ void add_pipeline_options(CLI::App& cmd, PipelineOptions& o) {
                  "none: meshes in their own coordinates; bbox: both normalised, outputs in the target's")
       ->check(CLI::IsMember({"none", "bbox"}))
       ->capture_default_str();
+  cmd.add_option("--target-mesh", o.target_mesh,
+                 "Mesh of the target (its coordinates) whose vertices get the labels and UVs; target.obj keeps its "
+                 "connectivity (default: the extracted t = 1 surface)")
+      ->check(CLI::ExistingFile);
   cmd.add_option("--method", o.method,
                  "How B and the slices find their preimages on A: trace (exact characteristics of grad s), upwind (the "
                  "paper's label propagation) or closest-point (no morph, the baseline)")

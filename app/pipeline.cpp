@@ -11,6 +11,7 @@
 #include <cstdio>
 #include <filesystem>
 #include <fstream>
+#include <functional>
 #include <iomanip>
 #include <iostream>
 #include <nlohmann/json.hpp>
@@ -36,6 +37,7 @@ struct Frame {
   Eigen::Vector3d center = Eigen::Vector3d::Zero();
   double scale = 1.0;
   Eigen::MatrixXd to_world(const Eigen::MatrixXd& P) const { return (P * scale).rowwise() + center.transpose(); }
+  Eigen::MatrixXd to_frame(const Eigen::MatrixXd& P) const { return (P.rowwise() - center.transpose()) / scale; }
 };
 
 Frame normalise(Surface& surface) {
@@ -88,6 +90,49 @@ void write_labels(const std::string& path, const Eigen::MatrixXd& labels) {
   for (Eigen::Index i = 0; i < labels.rows(); ++i)
     out << labels(i, 0) << ' ' << labels(i, 1) << ' ' << labels(i, 2) << '\n';
   if (!out) throw IoError(path + ": write failed");
+}
+
+// --target-mesh: the user's mesh of B (in B's coordinates) as the output surface. Each vertex takes its closest
+// point on the extracted B, a point of a boundary face of the 4D mesh, from which `labels_at` (trace or
+// interpolation, by method) gives its label. No provenance in the 4D mesh: source_tet and source_edge are zero.
+SliceMesh user_target_mesh(const PipelineOptions& options, const Frame& frame_b, const SliceMesh& extracted,
+                           const std::function<Eigen::MatrixXd(const std::vector<MeshPoint>&)>& labels_at) {
+  const Surface user = read_surface(options.target_mesh);
+  validate_surface(user, false);
+  Surface on_b;
+  on_b.V = extracted.V;
+  on_b.F = extracted.F.cast<int>();
+  on_b.name = "the extracted target";
+  const SurfaceLocator locator(on_b);
+  SliceMesh out;
+  out.V = frame_b.to_frame(user.V);
+  out.F = user.F;
+  const std::vector<SurfaceHit> hits = locator.closest_all(out.V);
+  std::vector<MeshPoint> points(hits.size());
+  for (std::size_t i = 0; i < hits.size(); ++i) {
+    for (int k = 0; k < 3; ++k) {
+      const int corner = extracted.F(hits[i].face, k);
+      // Every vertex of the t = 1 boundary is a mesh vertex (its edge is (v, v)).
+      if (extracted.source_edge(corner, 0) != extracted.source_edge(corner, 1))
+        throw TopologyError("--target-mesh: the extracted target has a vertex inside a mesh edge");
+      points[i].ids[std::size_t(k)] = extracted.source_edge(corner, 0);
+      points[i].weights[std::size_t(k)] = hits[i].barycentric(k);
+    }
+  }
+  out.labels = labels_at(points);
+  out.source_tet.assign(std::size_t(out.F.rows()), 0);
+  out.source_edge = Eigen::MatrixXi::Zero(out.V.rows(), 2);
+  out.edge_weight = Eigen::VectorXd::Zero(out.V.rows());
+  out.t = 1.0;
+  return out;
+}
+
+// The label at a mesh point: the weighted labels of its vertices.
+Eigen::RowVector3d interpolate(const MeshPoint& p, const Eigen::MatrixXd& labels) {
+  Eigen::RowVector3d label = Eigen::RowVector3d::Zero();
+  for (int k = 0; k < 4; ++k)
+    if (p.ids[std::size_t(k)] >= 0) label += p.weights[std::size_t(k)] * labels.row(p.ids[std::size_t(k)]);
+  return label;
 }
 
 constexpr double kGiB = 1024.0 * 1024.0 * 1024.0;
@@ -336,6 +381,20 @@ PipelineResult run_pipeline(const PipelineOptions& options) {
     vertex_traced.assign(std::size_t(mesh.vertex_count()), 0);
   }
   const Eigen::MatrixXd& seam_labels = options.method == "trace" ? mesh_labels : transport.labels;
+  auto add_trace = [&](const TraceResult& traced) {
+    traced_total.reached += traced.reached;
+    traced_total.stalled += traced.stalled;
+    traced_total.invalid += traced.invalid;
+    traced_total.tet_pieces += traced.tet_pieces;
+    traced_total.face_pieces += traced.face_pieces;
+    traced_total.edge_pieces += traced.edge_pieces;
+    traced_total.max_pieces = std::max(traced_total.max_pieces, traced.max_pieces);
+    traced_total.seconds += traced.seconds;
+  };
+  auto label_at = [&](const TraceResult& traced, std::size_t i) -> Eigen::RowVector3d {
+    if (traced.status[i] == TraceStatus::Reached) return traced.end.row(Eigen::Index(i));
+    return interpolate(traced.end_point[i], transport.labels);
+  };
   auto trace_labels = [&](SliceMesh& slice) {
     if (options.method != "trace") return;
     std::vector<MeshPoint> starts = edge_points(slice.source_edge, slice.edge_weight);
@@ -353,31 +412,32 @@ PipelineResult run_pipeline(const PipelineOptions& options) {
         starts.push_back(p);
       }
     const TraceResult traced = trace_to_source(mesh, gradient.vertex_field, starts, options.trace);
-    auto label_of = [&](std::size_t i) -> Eigen::RowVector3d {
-      if (traced.status[i] == TraceStatus::Reached) return traced.end.row(Eigen::Index(i));
-      Eigen::RowVector3d label = Eigen::RowVector3d::Zero();
-      const MeshPoint& p = traced.end_point[i];
-      for (int k = 0; k < 4; ++k)
-        if (p.ids[std::size_t(k)] >= 0)
-          label += p.weights[std::size_t(k)] * transport.labels.row(p.ids[std::size_t(k)]);
-      return label;
-    };
-    for (std::size_t i = 0; i < own; ++i) slice.labels.row(Eigen::Index(i)) = label_of(i);
-    for (std::size_t j = 0; j < vertices.size(); ++j) mesh_labels.row(vertices[j]) = label_of(own + j);
-    traced_total.reached += traced.reached;
-    traced_total.stalled += traced.stalled;
-    traced_total.invalid += traced.invalid;
-    traced_total.tet_pieces += traced.tet_pieces;
-    traced_total.face_pieces += traced.face_pieces;
-    traced_total.edge_pieces += traced.edge_pieces;
-    traced_total.max_pieces = std::max(traced_total.max_pieces, traced.max_pieces);
-    traced_total.seconds += traced.seconds;
+    for (std::size_t i = 0; i < own; ++i) slice.labels.row(Eigen::Index(i)) = label_at(traced, i);
+    for (std::size_t j = 0; j < vertices.size(); ++j) mesh_labels.row(vertices[j]) = label_at(traced, own + j);
+    add_trace(traced);
   };
 
   start = Clock::now();
   PipelineResult result;
   result.target = target_boundary(mesh, transport.labels);
-  trace_labels(result.target);
+  const Eigen::Index extracted_vertices = result.target.V.rows(), extracted_triangles = result.target.F.rows();
+  const bool user_target = !options.target_mesh.empty();
+  if (user_target) {
+    result.target = user_target_mesh(options, frame_b, result.target, [&](const std::vector<MeshPoint>& points) {
+      Eigen::MatrixXd labels(Eigen::Index(points.size()), 3);
+      if (options.method == "trace") {
+        const TraceResult traced = trace_to_source(mesh, gradient.vertex_field, points, options.trace);
+        for (std::size_t i = 0; i < points.size(); ++i) labels.row(Eigen::Index(i)) = label_at(traced, i);
+        add_trace(traced);
+      } else {
+        for (std::size_t i = 0; i < points.size(); ++i)
+          labels.row(Eigen::Index(i)) = interpolate(points[i], transport.labels);
+      }
+      return labels;
+    });
+  } else {
+    trace_labels(result.target);
+  }
   const std::vector<SurfaceHit> hits = locator.closest_all(result.target.labels);
   seconds["map"] = seconds_since(start) + locator_seconds;
   const StretchResult stretch = measure_stretch(A, result.target.V, result.target.F, points_of(hits));
@@ -409,7 +469,12 @@ PipelineResult run_pipeline(const PipelineOptions& options) {
     seam_options.topological = options.seams_mode == "topological";
     seam_options.texture = options.seams_mode == "texture";
   }
-  result.target_seams = split_seams(result.target, mesh, seam_labels, A, locator, seam_options);
+  {
+    // A user's mesh has no provenance in the 4D mesh to cut along; its texture seams are still split.
+    SeamOptions target_seam_options = seam_options;
+    if (user_target) target_seam_options.topological = false;
+    result.target_seams = split_seams(result.target, mesh, seam_labels, A, locator, target_seam_options);
+  }
   for (SliceOut& s : slices) s.seams = split_seams(s.mesh, mesh, seam_labels, A, locator, seam_options);
   const Eigen::MatrixXd seam_preimages = frame_a.to_world(points_of(locator.closest_all(result.target_seams.labels)));
   seconds["seams"] = seconds_since(start);
@@ -478,8 +543,8 @@ PipelineResult run_pipeline(const PipelineOptions& options) {
                       {"tets", mesh.tet_count()},
                       {"target_vertices", result.target_seams.V.rows()},
                       {"target_triangles", result.target_seams.F.rows()},
-                      {"extracted_target_vertices", result.target.V.rows()},
-                      {"extracted_target_triangles", result.target.F.rows()},
+                      {"extracted_target_vertices", extracted_vertices},
+                      {"extracted_target_triangles", extracted_triangles},
                       {"source_vertices", A.V.rows()},
                       {"source_triangles", A.F.rows()},
                       {"lattice_points", morph.lattice_points},

@@ -18,9 +18,13 @@
 namespace morphmap {
 
 struct PipelineOptions {
-  std::string source;          ///< mesh file or built-in shape spec (see mesh/shapes.h)
-  std::string target;          ///< mesh file or built-in shape spec
-  std::string output_dir;      ///< outputs go here (created if missing); empty = compute only
+  std::string source;      ///< mesh file or built-in shape spec (see mesh/shapes.h)
+  std::string target;      ///< mesh file or built-in shape spec
+  std::string output_dir;  ///< outputs go here (created if missing); empty = compute only
+  /// Optional mesh file in the target's coordinates (typically the target itself, or a finer/other mesh of it):
+  /// its vertices get labels and UVs (each through its closest point on the extracted B) and target.obj keeps its
+  /// connectivity. Empty: the extracted B (the t = 1 boundary of the 4D mesh) is the output.
+  std::string target_mesh;
   std::string align = "none";  ///< "none": meshes in their own coordinates; "bbox": both normalised to a unit box
   MorphOptions morph;          ///< lattice resolution
   ExtractOptions extract;      ///< time steps, time scale

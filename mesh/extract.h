@@ -11,10 +11,13 @@
 namespace morphmap {
 
 struct ExtractOptions {
-  int time_steps = 8;           ///< K: lattice intervals along t in [0, 1]
-  double time_scale = 0.0;      ///< c (length per unit t); <= 0 selects the default c = K * h (cubic lattice cells)
-  double zero_snap = 1e-2;      ///< |d| < zero_snap * h moves to +-zero_snap * h: crossings stay off lattice points
-                                ///< (1e-3 left slivers that cost the Laplace solve ~100x in conditioning)
+  int time_steps = 8;       ///< K: lattice intervals along t in [0, 1]
+  double time_scale = 0.0;  ///< c (length per unit t); <= 0 selects the default c = K * h (cubic lattice cells)
+  /// |d| < zero_snap * h moves to +-zero_snap * h: crossings, and the slivers they make, stay off lattice points.
+  /// Measured on concentric spheres (1 -> 2, 40 voxels, traced map): 0.01 leaves 0.01 h triangles whose preimages
+  /// fold (58 folded, max stretch 1.5e5), 0.1 none (max 37); the surface moves by at most 0.1 h there.
+  double zero_snap = 0.1;
+  ///< (1e-3 left slivers that cost the Laplace solve ~100x in conditioning)
   /// Called once the exact tet and vertex counts are known, before the mesh arrays are allocated; may
   /// throw (the pipeline's --max-memory guard does). Empty = no check.
   std::function<void(std::int64_t tets, std::int64_t vertices)> before_allocate;
@@ -23,11 +26,12 @@ struct ExtractOptions {
 struct ExtractResult {
   TetMesh4 mesh;
   double seconds = 0.0;
-  std::int64_t candidate_cubes = 0;   ///< spatial lattice cubes where d can change sign at some t (the only ones visited)
-  std::int64_t active_cells = 0;      ///< 4D hypercubes with a sign change
-  std::int64_t snapped_values = 0;    ///< values of dA and dB within zero_snap of zero (moved off zero)
-  std::int64_t prisms = 0;            ///< pentatopes cut in a prism (2|3 split), 3 tets each
-  std::int64_t scratch_bytes = 0;     ///< per-cell tables used besides the output mesh
+  std::int64_t candidate_cubes =
+      0;                            ///< spatial lattice cubes where d can change sign at some t (the only ones visited)
+  std::int64_t active_cells = 0;    ///< 4D hypercubes with a sign change
+  std::int64_t snapped_values = 0;  ///< values of dA and dB within zero_snap of zero (moved off zero)
+  std::int64_t prisms = 0;          ///< pentatopes cut in a prism (2|3 split), 3 tets each
+  std::int64_t scratch_bytes = 0;   ///< per-cell tables used besides the output mesh
 };
 
 /// Extracts the tetrahedral mesh; throws TopologyError when the morph has no zero crossing.

@@ -5,6 +5,7 @@
 
 #include <cmath>
 #include <nlohmann/json.hpp>
+#include <utility>
 
 #include "mesh/surface.h"
 
@@ -38,8 +39,8 @@ TEST_P(PipelineSolvers, IdentityMorphMapsEveryPointToItself) {
 
 TEST_P(PipelineSolvers, ConcentricSpheresMapRadially) {
   const double r0 = 0.5, r1 = 0.8;
-  PipelineOptions o = small_options("sphere:size=0.5,center=0/0/0,res=64", "sphere:size=0.8,center=0/0/0,res=64",
-                                    GetParam());
+  PipelineOptions o =
+      small_options("sphere:size=0.5,center=0/0/0,res=64", "sphere:size=0.8,center=0/0/0,res=64", GetParam());
   o.morph.voxels = 32;
   const PipelineResult r = run_pipeline(o);
   const nlohmann::json report = nlohmann::json::parse(r.report_json);
@@ -56,6 +57,37 @@ TEST_P(PipelineSolvers, ConcentricSpheresMapRadially) {
 }
 
 INSTANTIATE_TEST_SUITE_P(Solvers, PipelineSolvers, ::testing::Values("cholmod", "cg"));
+
+// Angles between each target vertex and its preimage on concentric spheres (the exact map is radial): mean and max.
+std::pair<double, double> radial_errors(const std::string& method, int voxels) {
+  PipelineOptions o =
+      small_options("sphere:size=0.5,center=0/0/0,res=128", "sphere:size=0.8,center=0/0/0,res=128", "cg");
+  o.method = method;
+  o.morph.voxels = voxels;
+  // Refining the lattice in time as in space keeps the hypersurface (time is a length: c stays fixed).
+  o.extract.time_steps = voxels / 4;
+  o.extract.time_scale = 0.3;
+  const PipelineResult r = run_pipeline(o);
+  double sum = 0.0, worst = 0.0;
+  for (Eigen::Index v = 0; v < r.target.V.rows(); ++v) {
+    const Eigen::Vector3d q = r.target.V.row(v).transpose(), label = r.target_labels.row(v).transpose();
+    const double angle = std::acos(std::clamp(q.normalized().dot(label.normalized()), -1.0, 1.0));
+    sum += angle;
+    worst = std::max(worst, angle);
+  }
+  return {sum / double(r.target.V.rows()), worst};
+}
+
+class PipelineMethods : public ::testing::TestWithParam<std::string> {};
+
+TEST_P(PipelineMethods, ConcentricSphereErrorFallsAtLeastLinearlyWithTheVoxelSize) {
+  const auto coarse = radial_errors(GetParam(), 12), fine = radial_errors(GetParam(), 24);
+  EXPECT_GT(coarse.first, 0.0);
+  EXPECT_LE(fine.first, 0.5 * coarse.first) << "mean angle " << coarse.first << " -> " << fine.first;
+  EXPECT_LE(fine.second, 0.5 * coarse.second) << "max angle " << coarse.second << " -> " << fine.second;
+}
+
+INSTANTIATE_TEST_SUITE_P(Methods, PipelineMethods, ::testing::Values("trace", "upwind"));
 
 TEST(Pipeline, SphereToTorusLabelsEveryTargetVertexAndTransfersUv) {
   PipelineOptions o = small_options("sphere", "torus", "cholmod");
