@@ -5,6 +5,8 @@
 #include <tbb/parallel_for.h>
 
 #include <Eigen/Dense>
+#include <algorithm>
+#include <array>
 #include <chrono>
 #include <cmath>
 #include <limits>
@@ -104,6 +106,7 @@ StretchResult measure_stretch(const Surface& A, const Eigen::MatrixXd& V, const 
   const std::vector<SurfaceHit> hits = locator.closest_all(centroid);
   const double mean_preimage_area = area_p.sum() / std::max<Eigen::Index>(1, n);
   double weight = 0.0, sum = 0.0, sum2 = 0.0;
+  std::vector<std::pair<double, double>> l2_area;  // (L2, B area) of measured triangles, for the quantiles
   r.min_sigma2 = std::numeric_limits<double>::infinity();
   r.max_sigma1 = 0.0;
   for (Eigen::Index f = 0; f < n; ++f) {
@@ -122,6 +125,21 @@ StretchResult measure_stretch(const Surface& A, const Eigen::MatrixXd& V, const 
     weight += area_b(f);
     sum += area_b(f) * l2;
     sum2 += area_b(f) * l2 * l2;
+    l2_area.emplace_back(l2, area_b(f));
+  }
+  if (weight > 0.0) {
+    std::sort(l2_area.begin(), l2_area.end());
+    double below = 0.0;
+    const std::array<double, 3> levels{{0.5, 0.9, 0.99}};
+    std::array<double*, 3> quantile{{&r.l2_median, &r.l2_p90, &r.l2_p99}};
+    std::size_t next = 0;
+    for (const auto& [l2, area] : l2_area) {
+      below += area;
+      while (next < levels.size() && below >= levels[next] * weight) *quantile[next++] = l2;
+      if (l2 > 2.0) r.area_over_2 += area / weight;
+      if (l2 > 10.0) r.area_over_10 += area / weight;
+    }
+    for (; next < levels.size(); ++next) *quantile[next] = l2_area.back().first;
   }
   r.coverage /= r.area_a;
   if (weight > 0.0) {

@@ -26,6 +26,11 @@ struct StretchResult {
   std::int64_t folded = 0;          ///< preimage triangles facing against A's outward normal
   std::int64_t collapsed = 0;       ///< preimage triangles of (near) zero area
   double coverage = 0.0;            ///< sum of preimage areas / area(A)
+  /// Area-weighted quantiles of L2 over the measured triangles (B areas): the median, 90th and 99th percentile.
+  /// A mean is dominated by a few badly compressed triangles; these say how much of B is how distorted.
+  double l2_median = 0.0, l2_p90 = 0.0, l2_p99 = 0.0;
+  double area_over_2 = 0.0;         ///< fraction of B's measured area with L2 above 2
+  double area_over_10 = 0.0;        ///< fraction of B's measured area with L2 above 10
   double area_a = 0.0, area_b = 0.0;
   double seconds = 0.0;
 };

@@ -29,6 +29,9 @@ TEST(Stretch, IdentityMapHasNoDistortion) {
   EXPECT_NEAR(r.coverage, 1.0, 1e-12);
   EXPECT_EQ(r.folded, 0);
   EXPECT_EQ(r.collapsed, 0);
+  EXPECT_NEAR(r.l2_median, 1.0, 1e-9);
+  EXPECT_NEAR(r.l2_p99, 1.0, 1e-9);
+  EXPECT_EQ(r.area_over_2, 0.0);
 }
 
 TEST(Stretch, UniformScaleIsNormalisedAway) {
@@ -55,6 +58,34 @@ TEST(Stretch, AnisotropicScaleGivesKnownSingularValues) {
   EXPECT_NEAR(r.min_sigma2, 1.0 / std::sqrt(2.0), 1e-12);
   EXPECT_NEAR(r.mean_l2, std::sqrt((2.0 + 0.5) / 2.0), 1e-12);
   EXPECT_NEAR(r.variance_l2, 0.0, 1e-12);
+}
+
+TEST(Stretch, AreaQuantilesSeparateAFewDistortedTrianglesFromTheRest) {
+  // 20 separate right triangles in the plane; B is A except triangle 0, whose preimage is squeezed 40x along x.
+  // Every B triangle has the same area, so triangle 0 is 5% of B.
+  const int n = 20;
+  Surface A;
+  A.V.resize(3 * n, 3);
+  A.F.resize(n, 3);
+  for (int i = 0; i < n; ++i) {
+    A.V.row(3 * i) << 2.0 * i, 0, 0;
+    A.V.row(3 * i + 1) << 2.0 * i + 1, 0, 0;
+    A.V.row(3 * i + 2) << 2.0 * i, 1, 0;
+    A.F.row(i) << 3 * i, 3 * i + 1, 3 * i + 2;
+  }
+  const Eigen::MatrixXd B = A.V;
+  Eigen::MatrixXd preimages = A.V;
+  preimages(1, 0) = 1.0 / 40.0;
+  A.V = preimages;  // A is the surface the preimages lie on
+  const StretchResult r = measure_stretch(A, B, faces_of(A), preimages);
+  const double normalise = std::sqrt(0.5 * n / (0.5 * (n - 1) + 0.5 / 40.0));
+  const double plain = 1.0 / normalise, squeezed = std::sqrt((40.0 * 40.0 + 1.0) / 2.0) / normalise;
+  EXPECT_NEAR(r.l2_median, plain, 1e-9);
+  EXPECT_NEAR(r.l2_p90, plain, 1e-9);
+  EXPECT_NEAR(r.l2_p99, squeezed, 1e-9);
+  EXPECT_NEAR(r.area_over_2, 1.0 / n, 1e-12);
+  EXPECT_NEAR(r.area_over_10, 1.0 / n, 1e-12);
+  EXPECT_NEAR(r.max_sigma1, 40.0 / normalise, 1e-9);
 }
 
 TEST(Stretch, FoldedAndCollapsedPreimagesAreCounted) {
