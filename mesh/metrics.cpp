@@ -162,8 +162,9 @@ Eigen::VectorXd stretch_per_triangle(const Surface& A, const Eigen::MatrixXd& V,
   const double mean_preimage_area = maps.area_p.sum() / std::max<Eigen::Index>(1, n);
   Eigen::VectorXd l2(n);
   for (Eigen::Index f = 0; f < n; ++f) {
-    l2(f) = collapsed(maps, f, mean_preimage_area, options) ? std::numeric_limits<double>::quiet_NaN()
-                      : std::sqrt(0.5 * (maps.sigma1(f) * maps.sigma1(f) + maps.sigma2(f) * maps.sigma2(f)));
+    l2(f) = collapsed(maps, f, mean_preimage_area, options)
+                ? std::numeric_limits<double>::quiet_NaN()
+                : std::sqrt(0.5 * (maps.sigma1(f) * maps.sigma1(f) + maps.sigma2(f) * maps.sigma2(f)));
   }
   return l2;
 }

@@ -12,25 +12,26 @@
 namespace morphmap {
 
 struct StretchOptions {
-  double collapse_ratio = 1e-12;  ///< a preimage triangle with area below this times the mean preimage area is collapsed
+  double collapse_ratio =
+      1e-12;  ///< a preimage triangle with area below this times the mean preimage area is collapsed
 };
 
 struct StretchResult {
-  std::int64_t triangles = 0;       ///< triangles of B
-  std::int64_t measured = 0;        ///< triangles entering the statistics (not collapsed)
-  double min_sigma2 = 0.0;          ///< smallest singular value ("compression"), normalised
-  double max_sigma1 = 0.0;          ///< largest singular value ("stretch"), normalised
-  double mean_l2 = 0.0;             ///< area-weighted (B areas) mean of L2 = sqrt((s1^2 + s2^2) / 2)
-  double variance_l2 = 0.0;         ///< area-weighted variance of L2
-  double sander_l2 = 0.0;           ///< Sander's L2 norm: sqrt(sum a L2^2 / sum a)
-  std::int64_t folded = 0;          ///< preimage triangles facing against A's outward normal
-  std::int64_t collapsed = 0;       ///< preimage triangles of (near) zero area
-  double coverage = 0.0;            ///< sum of preimage areas / area(A)
+  std::int64_t triangles = 0;  ///< triangles of B
+  std::int64_t measured = 0;   ///< triangles entering the statistics (not collapsed)
+  double min_sigma2 = 0.0;     ///< smallest singular value ("compression"), normalised
+  double max_sigma1 = 0.0;     ///< largest singular value ("stretch"), normalised
+  double mean_l2 = 0.0;        ///< area-weighted (B areas) mean of L2 = sqrt((s1^2 + s2^2) / 2)
+  double variance_l2 = 0.0;    ///< area-weighted variance of L2
+  double sander_l2 = 0.0;      ///< Sander's L2 norm: sqrt(sum a L2^2 / sum a)
+  std::int64_t folded = 0;     ///< preimage triangles facing against A's outward normal
+  std::int64_t collapsed = 0;  ///< preimage triangles of (near) zero area
+  double coverage = 0.0;       ///< sum of preimage areas / area(A)
   /// Area-weighted quantiles of L2 over the measured triangles (B areas): the median, 90th and 99th percentile.
   /// A mean is dominated by a few badly compressed triangles; these say how much of B is how distorted.
   double l2_median = 0.0, l2_p90 = 0.0, l2_p99 = 0.0;
-  double area_over_2 = 0.0;         ///< fraction of B's measured area with L2 above 2
-  double area_over_10 = 0.0;        ///< fraction of B's measured area with L2 above 10
+  double area_over_2 = 0.0;   ///< fraction of B's measured area with L2 above 2
+  double area_over_10 = 0.0;  ///< fraction of B's measured area with L2 above 10
   double area_a = 0.0, area_b = 0.0;
   double seconds = 0.0;
 };

@@ -3,7 +3,8 @@
 # (h = box / voxels) against the stretch figures of DESIGN.md (Table I of the paper) and the run time. Runs one map
 # at a time (each uses every core) and prints a Markdown table.
 #   usage: scripts/study_bunny.sh MODELS_DIR [OUT_DIR]   (OUT_DIR defaults to out/study; rerunning skips done runs)
-#   MORPHMAP=/path/to/morphmap overrides the binary; GRID="V:K:m ..." overrides the grid below.
+#   MORPHMAP=/path/to/morphmap overrides the binary; GRID="V:K:m:method ..." overrides the grid below (method:
+#   upwind = the paper's label propagation, trace = characteristics traced back from B).
 # c is given as m * c0 with c0 = the default time scale at 40 voxels and 8 steps (8 * box / 40), so rows that change
 # only V or K keep the same continuous hypersurface and show the discretisation alone; the column c/Kh is the
 # multiple of each row's own default (K * h, cubic 4D cells).
@@ -21,23 +22,24 @@ out="$(cd "$out" && pwd)"
 bin="${MORPHMAP:-$repo/build/morphmap}"
 [ -x "$bin" ] || { bash "$repo/scripts/build.sh" morphmap >&2; bin="$repo/build/morphmap"; }
 
-# V:K:m. One at a time around the default (40 voxels, 8 steps, m = 1), then combinations of the settings that
-# reduced the folds.
-grid="${GRID:-40:8:1 40:8:0.25 40:8:0.5 40:8:2 40:8:4 40:4:1 40:16:1 40:32:1 30:8:1 60:8:1 80:8:1 40:16:0.5 40:16:2 30:16:1 60:16:1}"
+# V:K:m:method. One at a time around 40 voxels, 8 steps, m = 1, for both transfer methods, then finer lattices.
+grid="${GRID:-40:8:1:upwind 40:8:1:trace 40:8:0.25:upwind 40:8:0.25:trace 40:8:0.5:upwind 40:8:2:upwind 40:8:2:trace
+40:8:4:upwind 40:8:4:trace 40:4:1:upwind 40:16:1:upwind 40:16:1:trace 30:8:1:upwind 60:8:1:upwind 60:8:1:trace
+80:8:1:upwind 80:8:1:trace 80:16:1:upwind 80:16:1:trace 100:8:1:upwind}"
 
-run() {  # V K m -> out/vV-kK-cm/report.json
-  local v=$1 k=$2 m=$3 c dir
+run() {  # V K m method -> out/vV-kK-cm-method/report.json
+  local v=$1 k=$2 m=$3 method=$4 c dir
   c=$(awk -v m="$m" -v box="$box" 'BEGIN { printf "%.6f", m * 8 * box / 40 }')
-  dir="$out/v$v-k$k-c$m"
-  local args="map sphere $models/bunny_closed.obj -o $dir --voxels $v --time-steps $k --time-scale $c --max-memory 14G"
+  dir="$out/v$v-k$k-c$m-$method"
+  local args="map sphere $models/bunny_closed.obj -o $dir --voxels $v --time-steps $k --time-scale $c --method $method --max-memory 14G"
   if [ -f "$dir/report.json" ] && [ "$(cat "$dir/args.txt" 2>/dev/null)" = "$args" ]; then return 0; fi
   rm -rf "$dir"
   echo "study: $args" >&2
   # map renames report.json into place last; args.txt, written after it, marks the run as done for this grid point.
-  if "$bin" $args >"$out/v$v-k$k-c$m.log" 2>&1; then
+  if "$bin" $args >"$dir.log" 2>&1; then
     echo "$args" >"$dir/args.txt"
   else
-    echo "study: run V=$v K=$k m=$m failed, see $out/v$v-k$k-c$m.log" >&2
+    echo "study: run V=$v K=$k m=$m $method failed, see $dir.log" >&2
   fi
 }
 
@@ -47,8 +49,8 @@ box=$(awk '$1 == "v" { for (i = 2; i <= 4; ++i) { if (!(i in lo) || $i < lo[i]) 
   END { m = 0; for (i = 2; i <= 4; ++i) if (hi[i] - lo[i] > m) m = hi[i] - lo[i]; print m }' "$models/bunny_closed.obj")
 
 for point in $grid; do
-  IFS=: read -r v k m <<<"$point"
-  run "$v" "$k" "$m"
+  IFS=: read -r v k m method <<<"$point"
+  run "$v" "$k" "$m" "$method"
 done
 
 echo
@@ -58,13 +60,13 @@ echo "mean < 1.51, variance < 1.11, no folded or collapsed triangles, coverage 1
 echo "extracted t = 1 boundary before any seam cut (2 for a single sphere like the bunny itself; each spurious handle"
 echo "lowers it by 2)."
 echo
-echo "| voxels | K | c / c0 | c / Kh | tets | seconds | target χ | min | max | mean | variance | folded | collapsed | coverage | fallbacks | goals met |"
-echo "|--:|--:|--:|--:|--:|--:|--:|--:|--:|--:|--:|--:|--:|--:|--:|---|"
+echo "| voxels | K | c / c0 | c / Kh | method | tets | seconds | target χ | min | max | mean | variance | median | p99 | area L2>10 | folded | collapsed | coverage | goals met |"
+echo "|--:|--:|--:|--:|---|--:|--:|--:|--:|--:|--:|--:|--:|--:|--:|--:|--:|--:|---|"
 for point in $grid; do
-  IFS=: read -r v k m <<<"$point"
-  r="$out/v$v-k$k-c$m/report.json"
+  IFS=: read -r v k m method <<<"$point"
+  r="$out/v$v-k$k-c$m-$method/report.json"
   if [ ! -f "$r" ]; then
-    echo "| $v | $k | $m | | failed (see v$v-k$k-c$m.log) | | | | | | | | | | | |"
+    echo "| $v | $k | $m | | $method | failed (see v$v-k$k-c$m-$method.log) | | | | | | | | | | | | | |"
     continue
   fi
   jq -r --arg m "$m" '
@@ -75,8 +77,9 @@ for point in $grid; do
     ([ $s.min_compression > 0.163, $s.max_stretch < 19.1, $s.mean_l2 < 1.51, $s.variance_l2 < 1.11,
        $s.folded == 0, $s.collapsed == 0, ($s.coverage - 1 | fabs) <= 0.02 ] | map(select(.)) | length) as $met |
     "| \($o.voxels) | \($o.time_steps) | \($m) | \(($o.time_scale / ($o.time_steps * $o.voxel_size) * 100 | round) / 100)"
-    + " | \(.counts.tets) | \((.seconds.total * 10 | round) / 10) | \((.counts.extracted_target_vertices // .counts.target_vertices) - (.counts.extracted_target_triangles // .counts.target_triangles) / 2)"
+    + " | \($o.method) | \(.counts.tets) | \((.seconds.total * 10 | round) / 10) | \((.counts.extracted_target_vertices // .counts.target_vertices) - (.counts.extracted_target_triangles // .counts.target_triangles) / 2)"
     + " | \($s.min_compression | g) | \($s.max_stretch | g)"
-    + " | \($s.mean_l2 | g) | \($s.variance_l2 | g) | \($s.folded) | \($s.collapsed) | \($s.coverage * 1000 | round / 1000)"
-    + " | \(.transport.fallbacks) | \(if $met == 7 then "all met" else "\($met)/7" end) |"' "$r"
+    + " | \($s.mean_l2 | g) | \($s.variance_l2 | g) | \($s.l2_median | g) | \($s.l2_p99 | g) | \($s.area_over_10 * 1000 | round / 1000)"
+    + " | \($s.folded) | \($s.collapsed) | \($s.coverage * 1000 | round / 1000)"
+    + " | \(if $met == 7 then "all met" else "\($met)/7" end) |"' "$r"
 done

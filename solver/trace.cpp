@@ -15,8 +15,6 @@
 #include <Eigen/Dense>
 #include <algorithm>
 #include <chrono>
-#include <cstdio>
-#include <cstdlib>
 #include <limits>
 #include <string>
 
@@ -170,7 +168,7 @@ class Tracer {
     for (int pass = 0; pass < options.field_smoothing; ++pass) field_ = smooth_field(mesh, adj_, field_);
   }
 
-  TraceStatus trace(const MeshPoint& start, MeshPoint& end, Stats& stats, bool debug_ = false) const {
+  TraceStatus trace(const MeshPoint& start, MeshPoint& end, Stats& stats) const {
     // The support of the current point: vertices with positive weight.
     std::array<int, 4> ids{{-1, -1, -1, -1}};
     std::array<double, 4> w{{0.0, 0.0, 0.0, 0.0}};
@@ -197,16 +195,7 @@ class Tracer {
       Simplex piece;
       Weights pw;
       if (!choose(ids, w, n, piece, pw)) return TraceStatus::Stalled;
-      if (debug_) {
-        std::fprintf(stderr, "step %d size %d ids", step, piece.size);
-        for (int j = 0; j < piece.size; ++j) std::fprintf(stderr, " %d(%.4f)", piece.ids[std::size_t(j)], pw(j));
-      }
       if (!integrate(piece, pw)) return TraceStatus::Stalled;
-      if (debug_) {
-        Eigen::Vector4d x = Eigen::Vector4d::Zero();
-        for (int j = 0; j < piece.size; ++j) x += pw(j) * mesh_.V.row(piece.ids[std::size_t(j)]).transpose();
-        std::fprintf(stderr, " -> (%.6f %.6f %.6f %.6f)\n", x(0), x(1), x(2), x(3));
-      }
       ++stats.pieces[piece.size];
       n = 0;
       for (int j = 0; j < piece.size; ++j)
@@ -433,8 +422,7 @@ TraceResult trace_to_source(const TetMesh4& mesh, const Eigen::MatrixXd& vertex_
   tbb::parallel_for(tbb::blocked_range<std::size_t>(0, count, 16), [&](const auto& r) {
     for (std::size_t i = r.begin(); i != r.end(); ++i) {
       MeshPoint& end = result.end_point[i];
-      static const char* dbg = std::getenv("MORPHMAP_TRACE_DEBUG");
-      result.status[i] = tracer.trace(starts[i], end, stats[i], dbg && std::size_t(std::atoi(dbg)) == i);
+      result.status[i] = tracer.trace(starts[i], end, stats[i]);
       Eigen::Vector3d x = Eigen::Vector3d::Zero();
       for (int k = 0; k < 4; ++k)
         if (end.ids[std::size_t(k)] >= 0 && end.ids[std::size_t(k)] < nv)

@@ -3,12 +3,17 @@
 #include <gtest/gtest.h>
 #include <sys/wait.h>
 
+#include <Eigen/Core>
+#include <algorithm>
 #include <array>
+#include <cmath>
 #include <cstdio>
 #include <filesystem>
 #include <fstream>
 #include <nlohmann/json.hpp>
+#include <sstream>
 #include <string>
+#include <vector>
 
 namespace fs = std::filesystem;
 
@@ -67,12 +72,14 @@ TEST_F(Cli, EmptyMesh) {
 }
 
 TEST_F(Cli, NonFiniteCoordinate) {
-  const std::string p = write("nan.off", "OFF\n4 4 0\n0 0 0\n1 0 0\n0 nan 0\n0 0 1\n3 0 2 1\n3 0 1 3\n3 0 3 2\n3 1 2 3\n");
+  const std::string p =
+      write("nan.off", "OFF\n4 4 0\n0 0 0\n1 0 0\n0 nan 0\n0 0 1\n3 0 2 1\n3 0 1 3\n3 0 3 2\n3 1 2 3\n");
   expect_rejected("sphere " + p, "nan.off");
 }
 
 TEST_F(Cli, FaceIndexOutOfRange) {
-  const std::string p = write("range.off", "OFF\n4 4 0\n0 0 0\n1 0 0\n0 1 0\n0 0 1\n3 0 2 1\n3 0 1 3\n3 0 3 9\n3 1 2 3\n");
+  const std::string p =
+      write("range.off", "OFF\n4 4 0\n0 0 0\n1 0 0\n0 1 0\n0 0 1\n3 0 2 1\n3 0 1 3\n3 0 3 9\n3 1 2 3\n");
   expect_rejected(p + " sphere", "range.off");
 }
 
@@ -96,6 +103,49 @@ TEST_F(Cli, UnknownOptionValues) {
   expect_rejected("sphere torus --slices 1.5", "1.5");
   expect_rejected("cube torus", "cube");
   expect_rejected("sphere:radius=2 torus", "radius");
+  expect_rejected("sphere torus --method teleport", "teleport");
+  expect_rejected("sphere torus --seams sideways", "sideways");
+  expect_rejected("sphere torus --zero-snap 0.9", "0.9");
+  expect_rejected("sphere torus --target-mesh " + (dir_ / "absent.obj").string(), "absent.obj");
+}
+
+// Reads the `v` lines of an OBJ file.
+std::vector<Eigen::Vector3d> obj_vertices(const fs::path& path) {
+  std::vector<Eigen::Vector3d> V;
+  std::ifstream in(path);
+  std::string tag;
+  for (std::string line; std::getline(in, line);) {
+    std::istringstream fields(line);
+    Eigen::Vector3d v;
+    if (fields >> tag && tag == "v" && fields >> v.x() >> v.y() >> v.z()) V.push_back(v);
+  }
+  return V;
+}
+
+TEST_F(Cli, TargetMeshGetsALabelPerVertexWithEveryMethod) {
+  // An octahedron of radius 0.8 around a sphere of radius 0.5: every method maps it nearly radially.
+  const std::string octahedron = write("octahedron.off",
+                                       "OFF\n6 8 0\n0.8 0 0\n-0.8 0 0\n0 0.8 0\n0 -0.8 0\n0 0 0.8\n0 0 -0.8\n"
+                                       "3 0 2 4\n3 2 1 4\n3 1 3 4\n3 3 0 4\n3 2 0 5\n3 1 2 5\n3 3 1 5\n3 0 3 5\n");
+  for (const std::string method : {"closest-point", "upwind", "trace"}) {
+    const fs::path out = dir_ / method;
+    const CommandRun r = run_command("map sphere:size=0.5,center=0/0/0 " + octahedron + " --target-mesh " + octahedron +
+                                     " --method " + method + " --voxels 16 --time-steps 4 -o " + out.string());
+    ASSERT_EQ(r.status, 0) << r.output;
+    const nlohmann::json report = nlohmann::json::parse(std::ifstream(out / "report.json"));
+    EXPECT_EQ(report["options"]["method"], method);
+    const std::vector<Eigen::Vector3d> V = obj_vertices(out / "target.obj");
+    EXPECT_GE(V.size(), 6u) << method;  // texture seams may add vertices, never remove the octahedron's
+    EXPECT_GE(report["counts"]["target_triangles"].get<int>(), 8) << method;
+    std::ifstream labels(out / "labels.txt");
+    std::size_t i = 0;
+    for (Eigen::Vector3d l; labels >> l.x() >> l.y() >> l.z(); ++i) {
+      ASSERT_LT(i, V.size()) << method;
+      EXPECT_NEAR(l.norm(), 0.5, 0.02) << method;
+      EXPECT_LT(std::acos(std::clamp(l.normalized().dot(V[i].normalized()), -1.0, 1.0)), 0.2) << method << " " << i;
+    }
+    EXPECT_EQ(i, V.size()) << method;
+  }
 }
 
 TEST_F(Cli, MemoryGuardRefusesBeforeAllocating) {
@@ -115,8 +165,8 @@ TEST_F(Cli, StretchReadsAMapAndRejectsBadLabels) {
   EXPECT_GT(j["mean_l2"].get<double>(), 0.0);
   // A labels file with one line too few names the file and the count.
   const std::string short_labels = write("short.txt", "0 0 0\n1 1 1\n");
-  const CommandRun bad = run_command("stretch " + (out / "target.obj").string() + " --labels " + short_labels +
-                                     " --source sphere");
+  const CommandRun bad =
+      run_command("stretch " + (out / "target.obj").string() + " --labels " + short_labels + " --source sphere");
   EXPECT_EQ(bad.status, 2) << bad.output;
   EXPECT_NE(bad.output.find("short.txt"), std::string::npos) << bad.output;
 }
