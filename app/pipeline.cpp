@@ -22,6 +22,7 @@
 #include "io/image.h"
 #include "io/mesh_io.h"
 #include "io/output_dir.h"
+#include "mesh/adjacency.h"
 #include "mesh/errors.h"
 #include "mesh/quality.h"
 #include "mesh/shapes.h"
@@ -626,6 +627,21 @@ PipelineResult run_pipeline(const PipelineOptions& options) {
                      {"max_pieces", traced_total.max_pieces},
                      {"seconds", traced_total.seconds},
                      {"fallback", "a stalled trace takes the upwind label interpolated where it stopped"}};
+  {
+    const ComponentCensus census = component_census(mesh);
+    report["components"] = {
+        {"through", census.through},
+        {"born", census.born},
+        {"vanishing", census.vanishing},
+        {"floating", census.floating},
+        {"born_vertices", census.born_vertices},
+        {"vanishing_vertices", census.vanishing_vertices},
+        {"floating_vertices", census.floating_vertices},
+        {"fallback",
+         "born components have s = 1 and no upwind source: upwind labels them with the closest point of A "
+         "(fallback_unreached), traces from them stall and take that label; vanishing components never reach B "
+         "(slices through them are labelled from A); floating ones take their mean time as s"}};
+  }
   report["transport"] = {{"fallbacks", transport.fallbacks()},
                          {"upwind_exact", transport.upwind_exact},
                          {"fallback_projected", transport.fallback_projected},

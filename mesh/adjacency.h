@@ -1,8 +1,11 @@
 // Vertex -> incident tets of the 4D tet mesh (paper §7: the star of a vertex), shared by the upwind sweep
-// and the characteristic tracer.
+// and the characteristic tracer; connected components and what each touches (paper §8: components born or
+// vanishing during the morph).
 #pragma once
 
+#include <algorithm>
 #include <cstdint>
+#include <numeric>
 #include <vector>
 
 #include "mesh/tet_mesh4.h"
@@ -21,5 +24,41 @@ struct VertexTets {
 };
 
 VertexTets build_vertex_tets(const TetIndices& T, Eigen::Index vertex_count);
+
+/// Union-find with path halving; roots are the smallest index of their set so labels are deterministic.
+class DisjointSets {
+ public:
+  explicit DisjointSets(Eigen::Index n) : parent_(static_cast<std::size_t>(n)) {
+    std::iota(parent_.begin(), parent_.end(), 0);
+  }
+  Eigen::Index find(Eigen::Index a) {
+    while (parent_[static_cast<std::size_t>(a)] != a) {
+      parent_[static_cast<std::size_t>(a)] = parent_[static_cast<std::size_t>(parent_[static_cast<std::size_t>(a)])];
+      a = parent_[static_cast<std::size_t>(a)];
+    }
+    return a;
+  }
+  void unite(Eigen::Index a, Eigen::Index b) {
+    a = find(a);
+    b = find(b);
+    if (a == b) return;
+    if (a < b) std::swap(a, b);
+    parent_[static_cast<std::size_t>(a)] = b;
+  }
+
+ private:
+  std::vector<Eigen::Index> parent_;
+};
+
+/// Connected components of the 4D mesh (through shared vertices) by the ends of the morph they touch.
+struct ComponentCensus {
+  std::int64_t through = 0;    ///< touch A and B: the map runs through them
+  std::int64_t born = 0;       ///< touch B only: appear during the morph, nothing flows into them from A
+  std::int64_t vanishing = 0;  ///< touch A only: disappear during the morph, nothing of them reaches B
+  std::int64_t floating = 0;   ///< touch neither end
+  std::int64_t born_vertices = 0, vanishing_vertices = 0, floating_vertices = 0;
+};
+
+ComponentCensus component_census(const TetMesh4& mesh);
 
 }  // namespace morphmap

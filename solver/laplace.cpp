@@ -16,6 +16,7 @@
 #include <sstream>
 #include <vector>
 
+#include "mesh/adjacency.h"
 #include "mesh/errors.h"
 #include "mesh/stopwatch.h"
 
@@ -186,31 +187,6 @@ void assemble_rows(const TetIndices& T, const Eigen::Matrix<double, Eigen::Dynam
     }
   });
 }
-
-/// Union-find with path halving; roots are the smallest index of their set so labels are deterministic.
-class DisjointSets {
- public:
-  explicit DisjointSets(Eigen::Index n) : parent_(static_cast<std::size_t>(n)) {
-    std::iota(parent_.begin(), parent_.end(), 0);
-  }
-  Eigen::Index find(Eigen::Index a) {
-    while (parent_[static_cast<std::size_t>(a)] != a) {
-      parent_[static_cast<std::size_t>(a)] = parent_[static_cast<std::size_t>(parent_[static_cast<std::size_t>(a)])];
-      a = parent_[static_cast<std::size_t>(a)];
-    }
-    return a;
-  }
-  void unite(Eigen::Index a, Eigen::Index b) {
-    a = find(a);
-    b = find(b);
-    if (a == b) return;
-    if (a < b) std::swap(a, b);
-    parent_[static_cast<std::size_t>(a)] = b;
-  }
-
- private:
-  std::vector<Eigen::Index> parent_;
-};
 
 }  // namespace
 

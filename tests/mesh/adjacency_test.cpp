@@ -1,0 +1,70 @@
+// Vertex stars and the component census of the 4D mesh.
+#include "mesh/adjacency.h"
+
+#include <gtest/gtest.h>
+
+#include "tests/mesh/product_mesh.h"
+
+namespace morphmap {
+namespace {
+
+using test_mesh::icosphere;
+using test_mesh::octahedron;
+using test_mesh::product_mesh;
+
+// `extra` appended to `main` as a second component, its tau shifted by `shift`, with its ends relabelled.
+TetMesh4 with_component(const TetMesh4& main, TetMesh4 extra, double shift, VertexSide keep) {
+  extra.V.col(3).array() += shift;
+  extra.V.col(0).array() += 5.0;
+  for (auto& side : extra.side)
+    if (side != keep) side = VertexSide::Interior;
+  TetMesh4 mesh = main;
+  const Eigen::Index nm = main.vertex_count();
+  mesh.V.resize(nm + extra.vertex_count(), 4);
+  mesh.V << main.V, extra.V;
+  mesh.T.resize(main.tet_count() + extra.tet_count(), 4);
+  mesh.T << main.T, (extra.T.array() + int(nm)).matrix();
+  mesh.side.insert(mesh.side.end(), extra.side.begin(), extra.side.end());
+  return mesh;
+}
+
+TEST(Adjacency, StarsListEveryIncidentTetOnceInOrder) {
+  const TetMesh4 mesh = product_mesh(octahedron(), 2, 1.0);
+  const VertexTets adj = build_vertex_tets(mesh.T, mesh.vertex_count());
+  std::int64_t total = 0;
+  for (Eigen::Index v = 0; v < mesh.vertex_count(); ++v) {
+    for (std::int64_t j = adj.first(int(v)); j < adj.last(int(v)); ++j) {
+      const int t = adj.tet(j);
+      EXPECT_TRUE((mesh.T.row(t).array() == int(v)).any());
+      if (j > adj.first(int(v))) {
+        EXPECT_LT(adj.tet(j - 1), t);
+      }
+    }
+    total += adj.last(int(v)) - adj.first(int(v));
+  }
+  EXPECT_EQ(total, 4 * mesh.tet_count());
+}
+
+TEST(Adjacency, CensusTellsBornAndVanishingComponentsApart) {
+  const TetMesh4 main = product_mesh(icosphere(1), 4, 1.0);
+  const ComponentCensus alone = component_census(main);
+  EXPECT_EQ(alone.through, 1);
+  EXPECT_EQ(alone.born + alone.vanishing + alone.floating, 0);
+
+  // An octahedron that exists for t in [0.5, 1] only touches B; one for t in [0, 0.5] only touches A.
+  const TetMesh4 born = with_component(main, product_mesh(octahedron(), 2, 0.5), 0.5, VertexSide::B);
+  const ComponentCensus b = component_census(born);
+  EXPECT_EQ(b.through, 1);
+  EXPECT_EQ(b.born, 1);
+  EXPECT_EQ(b.born_vertices, 18);  // 6 vertices x 3 layers
+  EXPECT_EQ(b.vanishing, 0);
+  const TetMesh4 both = with_component(born, product_mesh(octahedron(), 2, 0.5), 0.0, VertexSide::A);
+  const ComponentCensus c = component_census(both);
+  EXPECT_EQ(c.born, 1);
+  EXPECT_EQ(c.vanishing, 1);
+  EXPECT_EQ(c.vanishing_vertices, 18);
+  EXPECT_EQ(c.floating, 0);
+}
+
+}  // namespace
+}  // namespace morphmap
