@@ -182,6 +182,9 @@ class Tracer {
     end = start;
     if (n == 0 || !held(ids, n)) return TraceStatus::Invalid;
     normalise(w, n);
+    // Supports (sorted ids) before the last two pieces: a piece that returns the point to the support it had two
+    // pieces ago (along an edge and back, where the field converges from both ends) is a stagnation point.
+    std::array<int, 4> before_last{{-2, -2, -2, -2}}, last{{-2, -2, -2, -2}};
     for (int step = 0;; ++step) {
       end = MeshPoint{};
       for (int k = 0; k < n; ++k) {
@@ -192,6 +195,10 @@ class Tracer {
       for (int k = 0; k < n; ++k) on_a = on_a && mesh_.side[std::size_t(ids[std::size_t(k)])] == VertexSide::A;
       if (on_a) return TraceStatus::Reached;
       if (step >= options_.max_steps) return TraceStatus::Stalled;
+      const std::array<int, 4> key = support_key(ids, n);
+      if (n < 3 && key == before_last) return TraceStatus::Stalled;
+      before_last = last;
+      last = key;
       Simplex piece;
       Weights pw;
       if (!choose(ids, w, n, piece, pw)) return TraceStatus::Stalled;
@@ -209,6 +216,15 @@ class Tracer {
   }
 
  private:
+  static std::array<int, 4> support_key(const std::array<int, 4>& ids, int n) {
+    std::array<int, 4> key{{-1, -1, -1, -1}};
+    for (int k = 0; k < n; ++k) key[std::size_t(k)] = ids[std::size_t(k)];
+    for (int i = 1; i < n; ++i)  // insertion sort of at most 4 ids
+      for (int j = i; j > 0 && key[std::size_t(j - 1)] > key[std::size_t(j)]; --j)
+        std::swap(key[std::size_t(j - 1)], key[std::size_t(j)]);
+    return key;
+  }
+
   static void normalise(std::array<double, 4>& w, int n) {
     double sum = 0.0;
     for (int k = 0; k < n; ++k) sum += w[std::size_t(k)];

@@ -34,7 +34,7 @@ struct TraceOptions {
   int field_smoothing = 1;
   /// Give up (status stalled) after this many pieces (a piece ends on a face of its simplex): bounds orbits
   /// around stagnation points of T. Traces on the test morphs need at most a few hundred.
-  int max_steps = 100000;
+  int max_steps = 20000;
 };
 
 /// A point of the tet mesh: a convex combination of 1 to 4 mesh vertices (unused ids -1, weights 0).
