@@ -32,7 +32,7 @@ void barycentric_gradients(const Points4& V, const TetIndices& T, Eigen::MatrixX
 SparseMatrixD cotangent_stiffness(const Points4& V, const TetIndices& T);
 
 struct LaplaceOptions {
-  std::string solver = "cg-agg";  ///< backend name for make_solver. cg-agg was the fastest on 8 of the 9 morph
+  std::string solver = "cg-amg";  ///< backend name for make_solver. cg-agg was the fastest on 8 of the 9 morph
                                   ///< systems of bench/bench_solve.cpp (0.2M-1.7M tets, to residual 1e-8; 1.1-1.45x
                                   ///< faster than cg, tied at 0.2M sphere->torus), cg many times faster than cholmod,
                                   ///< ldlt and gauss-seidel

@@ -7,7 +7,9 @@
 #include <cstdio>
 #include <filesystem>
 #include <fstream>
+#include <map>
 #include <nlohmann/json.hpp>
+#include <sstream>
 #include <string>
 
 namespace fs = std::filesystem;
@@ -67,12 +69,14 @@ TEST_F(Cli, EmptyMesh) {
 }
 
 TEST_F(Cli, NonFiniteCoordinate) {
-  const std::string p = write("nan.off", "OFF\n4 4 0\n0 0 0\n1 0 0\n0 nan 0\n0 0 1\n3 0 2 1\n3 0 1 3\n3 0 3 2\n3 1 2 3\n");
+  const std::string p =
+      write("nan.off", "OFF\n4 4 0\n0 0 0\n1 0 0\n0 nan 0\n0 0 1\n3 0 2 1\n3 0 1 3\n3 0 3 2\n3 1 2 3\n");
   expect_rejected("sphere " + p, "nan.off");
 }
 
 TEST_F(Cli, FaceIndexOutOfRange) {
-  const std::string p = write("range.off", "OFF\n4 4 0\n0 0 0\n1 0 0\n0 1 0\n0 0 1\n3 0 2 1\n3 0 1 3\n3 0 3 9\n3 1 2 3\n");
+  const std::string p =
+      write("range.off", "OFF\n4 4 0\n0 0 0\n1 0 0\n0 1 0\n0 0 1\n3 0 2 1\n3 0 1 3\n3 0 3 9\n3 1 2 3\n");
   expect_rejected(p + " sphere", "range.off");
 }
 
@@ -115,10 +119,28 @@ TEST_F(Cli, StretchReadsAMapAndRejectsBadLabels) {
   EXPECT_GT(j["mean_l2"].get<double>(), 0.0);
   // A labels file with one line too few names the file and the count.
   const std::string short_labels = write("short.txt", "0 0 0\n1 1 1\n");
-  const CommandRun bad = run_command("stretch " + (out / "target.obj").string() + " --labels " + short_labels +
-                                     " --source sphere");
+  const CommandRun bad =
+      run_command("stretch " + (out / "target.obj").string() + " --labels " + short_labels + " --source sphere");
   EXPECT_EQ(bad.status, 2) << bad.output;
   EXPECT_NE(bad.output.find("short.txt"), std::string::npos) << bad.output;
+}
+
+TEST_F(Cli, ChangeThresholdStopsGaussSeidel) {
+  // The paper's stopping rule: a larger threshold stops the diffusion after fewer sweeps, each run below its own.
+  std::map<double, nlohmann::json> solver;
+  for (double threshold : {1e-3, 1e-5}) {
+    const fs::path out = dir_ / ("gs" + std::to_string(threshold));
+    std::ostringstream args;
+    args << "map sphere torus -o " << out.string() << " --voxels 12 --time-steps 4 --solver gauss-seidel"
+         << " --change-threshold " << threshold;
+    const CommandRun r = run_command(args.str());
+    ASSERT_EQ(r.status, 0) << r.output;
+    solver[threshold] = nlohmann::json::parse(std::ifstream(out / "report.json"))["solver"];
+    EXPECT_EQ(solver[threshold]["name"], "gauss-seidel");
+    EXPECT_LT(solver[threshold]["change"].get<double>(), threshold);
+  }
+  EXPECT_LT(solver[1e-3]["iterations"].get<int>(), solver[1e-5]["iterations"].get<int>());
+  expect_rejected("sphere torus --change-threshold 0", "change-threshold");
 }
 
 TEST_F(Cli, HelpOnEveryCommand) {
@@ -139,7 +161,7 @@ TEST_F(Cli, DemoWritesEveryOutput) {
   const nlohmann::json report = nlohmann::json::parse(std::ifstream(out / "report.json"));
   for (const char* key : {"vertices", "tets", "target_vertices", "target_triangles"})
     EXPECT_GT(report["counts"][key].get<std::int64_t>(), 0) << key;
-  EXPECT_EQ(report["solver"]["name"], "cg-agg");
+  EXPECT_EQ(report["solver"]["name"], "cg-amg");
   EXPECT_TRUE(report["transport"].contains("fallbacks"));
   EXPECT_GT(report["peak_memory_bytes"].get<std::int64_t>(), 0);
   // labels.txt has one line per vertex of target.obj.
