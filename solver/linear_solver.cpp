@@ -501,7 +501,8 @@ void for_row_blocks(int n, const F& f) {
 /// run in parallel, each in node order, and are numbered in block order, so the result does not depend on the
 /// thread count. Confining aggregates to blocks costs little (a block's boundary rows are a small part of it) and
 /// keeps each aggregate's rows close in memory, which makes the Galerkin product and the transfers cache friendly.
-std::vector<int> aggregate_strong(const CsrView& A, const std::vector<double>& diag, double theta, int& count) {
+std::vector<int> aggregate_strong(const CsrView& A, const std::vector<double>& diag, double theta, int& count,
+                                  std::vector<int>& offset) {
   const int n = A.rows;
   std::vector<double> scale(static_cast<std::size_t>(n));
   for_row_blocks(n, [&](int begin, int end) {
@@ -556,7 +557,7 @@ std::vector<int> aggregate_strong(const CsrView& A, const std::vector<double>& d
     block_aggregates[std::size_t(begin / int(kBlockRows))] = local;
   });
   // Local numbers to global ones, block by block.
-  std::vector<int> offset(block_aggregates.size() + 1, 0);
+  offset.assign(block_aggregates.size() + 1, 0);
   for (std::size_t block = 0; block < block_aggregates.size(); ++block)
     offset[block + 1] = offset[block] + block_aggregates[block];
   count = offset.back();
@@ -569,20 +570,23 @@ std::vector<int> aggregate_strong(const CsrView& A, const std::vector<double>& d
 
 /// One level of the hierarchy. Its smoother is l1-Jacobi, x <- x + D^-1 (b - A x) with
 /// D_i = (sum_j |a_ij|) / kJacobiWeight, which converges for any SPD A (D - A/2 is positive definite) and whose
-/// sweeps are plain row products with no dependency between rows. (A symmetric hybrid Gauss-Seidel took 30 instead
-/// of 33 iterations on a 1.6M-tet morph, but its sweeps cost about twice as much.) The cycle reads the operator only
-/// as S = A D^-1, in single precision (it only preconditions, so float values cut the bytes of each sweep by a
-/// third at no cost in CG iterations): with u = D x, A x = S u, so each of a cycle's two sweeps is one pass over S.
+/// sweeps are plain row products with no dependency between rows. (With a K-cycle, a symmetric hybrid Gauss-Seidel
+/// by row blocks took 30 iterations where l1-Jacobi took 33 on the 1.6M-tet sphere -> bunny system, but each of its
+/// sweeps cost about two SpMVs: a chain of dependent rows and several short spans per row.) The cycle reads the
+/// operator only as S = A D^-1, in single precision (it only preconditions, so float values cut the bytes of each sweep
+/// by a third at no cost in CG iterations): with u = D x, A x = S u, so each of a cycle's two sweeps is one pass over
+/// S.
 struct AmgLevel {
   int n = 0;
   Csr<double> op;              // the operator below the finest level: pattern kept (it is S's), values until set up
   const int* start = nullptr;  // S's pattern: A's own arrays on the finest level, op's below
   const int* col = nullptr;
-  std::vector<float> val;                  // S = A D^-1
-  std::vector<double> scale;               // D
-  std::vector<int> agg;                    // row -> row of the next coarser level
-  std::vector<int> member_start, members;  // row of the next coarser level -> its rows here, in order
-  Eigen::VectorXd b, x, r, u;              // right-hand side, solution, residual, D (x + P e)
+  std::vector<float> val;                    // S = A D^-1
+  std::vector<double> scale, inverse_scale;  // D, D^-1 (a multiply per row instead of a division)
+  std::vector<int> agg;                      // row -> row of the next coarser level
+  std::vector<int> member_start, members;    // row of the next coarser level -> its rows here, in order (set-up)
+  std::vector<int> block_offset;             // row block k's aggregates are block_offset[k] .. block_offset[k + 1] - 1
+  Eigen::VectorXd b, x, u;                   // right-hand side, solution, D (x + P e)
 };
 
 /// Row i of S times v, with two interleaved partial sums (a row has ~15 entries).
@@ -650,8 +654,10 @@ Csr<double> galerkin_rows(const CsrView& A, const AmgLevel& L, int count) {
 
 /// The preconditioner of cg-amg: one V-cycle of aggregation multigrid, l1-Jacobi pre- and post-smoothing (the
 /// same symmetric smoother, so the cycle is a symmetric positive definite operator and plain CG applies), down to
-/// a coarsest level solved by Cholesky. Every kernel runs over fixed row blocks and sums in a fixed order, so z is
-/// bitwise the same for any thread count.
+/// a coarsest level solved by Cholesky. (Notay's K-cycle, two flexible-CG steps on every coarse level, took 33
+/// instead of 40 iterations on the 1.6M-tet sphere -> bunny system but no less time; over-correcting the coarse
+/// correction by 1.3-1.8 took more iterations.) Every kernel runs over fixed row blocks and sums in a fixed order, so z
+/// is bitwise the same for any thread count.
 class AggregationMultigrid {
  public:
   /// Builds the hierarchy of A (checked by the caller): aggregation and Galerkin products until a level has at
@@ -669,14 +675,15 @@ class AggregationMultigrid {
       const std::vector<double> diagonal = prepare_smoother(L, Av);
       L.b.resize(L.n);
       L.x.resize(L.n);
-      L.r.resize(L.n);
       L.u.resize(L.n);
       if (L.n <= options.amg_coarsest || depth + 1 == int(kMaxLevels)) break;
       int count = 0;
-      L.agg = aggregate_strong(Av, diagonal, options.amg_strength * std::pow(0.5, depth), count);
+      L.agg = aggregate_strong(Av, diagonal, options.amg_strength * std::pow(0.5, depth), count, L.block_offset);
       if (count == 0 || count * 10 > L.n * 9) break;  // too little progress to be worth a level
       members_of(L, count);
       next = galerkin_rows(Av, L, count);
+      L.member_start = std::vector<int>();
+      L.members = std::vector<int>();
     }
     // The coarsest operator is factorised exactly: densely when it is as small as amg_coarsest asks (a dense solve
     // has no permutation or temporaries to pay for at every cycle), else sparse (aggregation stalled, e.g. on a
@@ -737,7 +744,7 @@ class AggregationMultigrid {
           std::int64_t(L.val.size()) * std::int64_t(sizeof(float)) +
           std::int64_t(L.op.start.size() + L.op.col.size() + L.agg.size() + L.members.size() + L.member_start.size()) *
               kIndexBytes +
-          std::int64_t(L.scale.size() + L.b.size() + L.x.size() + L.r.size() + L.u.size()) * kDoubleBytes;
+          std::int64_t(L.scale.size() + L.inverse_scale.size() + L.b.size() + L.x.size() + L.u.size()) * kDoubleBytes;
     }
     const Eigen::Index coarsest = levels_.empty() ? 0 : levels_.back().n;
     if (coarsest <= kDenseCoarsest) return bytes + std::int64_t(coarsest) * coarsest * kDoubleBytes;
@@ -745,8 +752,8 @@ class AggregationMultigrid {
   }
 
  private:
-  // Measured on the 1.6M-tet sphere -> bunny system (PCG iterations to 1e-8): weight 1.4: 34, 1.6: 33, 1.8: 33;
-  // 1.0 (plain l1-Jacobi): 39. Below 2 the smoother stays convergent.
+  // Measured on the 1.6M-tet sphere -> bunny system with a K-cycle (PCG iterations to 1e-8): weight 1.0 (plain
+  // l1-Jacobi): 39, 1.4: 34, 1.6: 33, 1.8: 33. Below 2 the smoother stays convergent.
   static constexpr double kJacobiWeight = 1.6;
   static constexpr int kDenseCoarsest = 2000;
   static constexpr std::size_t kMaxLevels = 16;
@@ -756,6 +763,7 @@ class AggregationMultigrid {
     const int n = L.n;
     std::vector<double> diagonal(static_cast<std::size_t>(n), 0.0);
     L.scale.resize(std::size_t(n));
+    L.inverse_scale.resize(std::size_t(n));
     for_row_blocks(n, [&](int begin, int end) {
       for (int i = begin; i < end; ++i) {
         double l1 = 0.0;
@@ -764,6 +772,7 @@ class AggregationMultigrid {
           l1 += std::abs(A.val[k]);
         }
         L.scale[std::size_t(i)] = l1 / kJacobiWeight;
+        L.inverse_scale[std::size_t(i)] = kJacobiWeight / l1;
       }
     });
     L.start = A.start;
@@ -772,7 +781,7 @@ class AggregationMultigrid {
     for_row_blocks(n, [&](int begin, int end) {
       for (int i = begin; i < end; ++i)
         for (int k = A.start[i]; k < A.start[i + 1]; ++k)
-          L.val[std::size_t(k)] = float(A.val[k] / L.scale[std::size_t(A.col[k])]);
+          L.val[std::size_t(k)] = float(A.val[k] * L.inverse_scale[std::size_t(A.col[k])]);
     });
     return diagonal;
   }
@@ -798,7 +807,7 @@ class AggregationMultigrid {
   /// Post-smoothing of row i once descend(l, b) has set u = D (x + P e): x_i + D_i^-1 (b - A (x + P e))_i, which is
   /// (u_i + b_i - (S u)_i) / D_i.
   static double post_smooth(const AmgLevel& L, const Eigen::VectorXd& b, int i) {
-    return (L.u(i) + b(i) - level_row(L, i, L.u.data())) / L.scale[std::size_t(i)];
+    return (L.u(i) + b(i) - level_row(L, i, L.u.data())) * L.inverse_scale[std::size_t(i)];
   }
 
   /// The V-cycle on level l down to the coarse correction. Pre-smoothing from x = 0 gives x = D^-1 b, whose
@@ -809,16 +818,12 @@ class AggregationMultigrid {
   void descend(std::size_t l, const Eigen::VectorXd& b) {
     AmgLevel& L = levels_[l];
     AmgLevel& C = levels_[l + 1];
+    // A row block's aggregates hold rows of that block only, so the block restricts its own residual rows as it
+    // computes them, in row order (the order of a sum over each aggregate's members), with no residual vector.
     for_row_blocks(L.n, [&](int begin, int end) {
-      for (int i = begin; i < end; ++i) L.r(i) = b(i) - level_row(L, i, b.data());
-    });
-    for_row_blocks(C.n, [&](int begin, int end) {
-      for (int c = begin; c < end; ++c) {
-        double sum = 0.0;
-        for (int m = L.member_start[std::size_t(c)]; m < L.member_start[std::size_t(c) + 1]; ++m)
-          sum += L.r(L.members[std::size_t(m)]);
-        C.b(c) = sum;
-      }
+      const std::size_t block = std::size_t(begin / int(kBlockRows));
+      for (int c = L.block_offset[block]; c < L.block_offset[block + 1]; ++c) C.b(c) = 0.0;
+      for (int i = begin; i < end; ++i) C.b(L.agg[std::size_t(i)]) += b(i) - level_row(L, i, b.data());
     });
     if (l + 2 == levels_.size()) {
       C.x = C.b;
