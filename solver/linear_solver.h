@@ -66,7 +66,7 @@ std::vector<std::string> solver_names();
 ///  - "cg-ic": conjugate gradients with an incomplete Cholesky preconditioner (Eigen::IncompleteCholesky).
 ///  - "cg-amg": conjugate gradients preconditioned by one V-cycle of aggregation algebraic multigrid (l1-Jacobi
 ///    smoothing, Galerkin coarse levels, dense Cholesky on the coarsest), TBB-parallel, bitwise independent of
-///    threads. About 8x fewer iterations than cg on our morph systems.
+///    threads. 6-8x fewer iterations than cg on our morph systems.
 ///  - "gauss-seidel": the paper's diffusion, sequential sweeps from the initial guess until the mean change per
 ///    unknown falls below SolveOptions::change_threshold (or max_iterations sweeps).
 ///  - "ldlt": Eigen::SimplicialLDLT, what libigl's min_quad_with_fixed uses; a reference.
