@@ -695,7 +695,7 @@ class AggregationMultigrid {
       for (int i = 0; i < C.n; ++i)
         for (int k = last.start[i]; k < last.start[i + 1]; ++k) dense(last.col[k], i) = last.val[k];
       dense_factor_.compute(dense);
-      if (dense_factor_.info() != Eigen::Success) throw SolverError("cg-amg: coarsest factorisation failed");
+      if (dense_factor_.info() != Eigen::Success) throw coarsest_failed(C.n);
     } else {
       SparseMatrixD coarse(C.n, C.n);
       coarse.resizeNonZeros(last.start[C.n]);
@@ -703,7 +703,7 @@ class AggregationMultigrid {
       std::copy(last.col, last.col + last.start[C.n], coarse.innerIndexPtr());
       std::copy(last.val, last.val + last.start[C.n], coarse.valuePtr());
       sparse_factor_.compute(coarse);
-      if (sparse_factor_.info() != Eigen::Success) throw SolverError("cg-amg: coarsest factorisation failed");
+      if (sparse_factor_.info() != Eigen::Success) throw coarsest_failed(C.n);
     }
     for (AmgLevel& L : levels_) L.op.val = std::vector<double>();
   }
@@ -757,6 +757,11 @@ class AggregationMultigrid {
   static constexpr double kJacobiWeight = 1.6;
   static constexpr int kDenseCoarsest = 2000;
   static constexpr std::size_t kMaxLevels = 16;
+
+  static SolverError coarsest_failed(int n) {
+    return SolverError("cg-amg: Cholesky factorisation of the coarsest level (" + std::to_string(n) +
+                       " unknowns) failed: its Galerkin operator is not numerically positive definite");
+  }
 
   /// S = A D^-1 in single precision and D; returns the diagonal of A.
   static std::vector<double> prepare_smoother(AmgLevel& L, const CsrView& A) {

@@ -498,6 +498,14 @@ TEST(LinearSolver, CholmodReportsIndefiniteColumn) {
       << message;
 }
 
+TEST(LinearSolver, MultigridRejectsIndefiniteMatrix) {
+  // Small enough to be the coarsest level itself, so its Cholesky factorisation meets the negative pivot.
+  const SparseMatrixD A = from_triplets(3, {{0, 0, 4.0}, {1, 1, 1.0}, {2, 2, 1.0}, {0, 1, 4.0}, {1, 0, 4.0}});
+  EXPECT_EQ(error_of("cg-amg", A),
+            "cg-amg: Cholesky factorisation of the coarsest level (3 unknowns) failed: its Galerkin operator is not "
+            "numerically positive definite");
+}
+
 TEST(LinearSolver, CgDetectsIndefiniteMatrix) {
   const SparseMatrixD A = from_triplets(2, {{0, 0, 1.0}, {1, 1, 1.0}, {0, 1, 2.0}, {1, 0, 2.0}});
   auto solver = make_solver("cg");
