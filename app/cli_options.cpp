@@ -33,6 +33,10 @@ void add_pipeline_options(CLI::App& cmd, PipelineOptions& o) {
   cmd.add_option("--max-iterations", o.laplace.solve.max_iterations, "Iteration limit of iterative solvers")
       ->check(CLI::PositiveNumber)
       ->capture_default_str();
+  cmd.add_option("--change-threshold", o.laplace.solve.change_threshold,
+                 "gauss-seidel stops once the mean change of s per unknown in a sweep is below this")
+      ->check(CLI::PositiveNumber)
+      ->capture_default_str();
   cmd.add_option("--slices", o.slices, "Morph times in (0,1) at which to write slice_<t>.obj")->delimiter(',');
   cmd.add_option("--align", o.align,
                  "none: meshes in their own coordinates; bbox: both normalised, outputs in the target's")

@@ -6,11 +6,11 @@
 // $MORPHMAP_MODELS, default ../shared/data/models.
 //
 // BM_Solve/<morph>/<size>/<backend>: one compute + solve per iteration from s = t (solve_harmonic's warm start),
-// to relative residual 1e-8 for cg, cg-ic and auto (cholmod and ldlt are direct), and to the paper's change
+// to relative residual 1e-8 for cg, cg-ic, cg-amg and auto (cholmod and ldlt are direct), and to the paper's change
 // threshold 1e-5 for gauss-seidel (which leaves a residual ~1e-4). Counters: iterations, residual, change
 // (gauss-seidel), setup_seconds, solve_seconds, memory_bytes, unknowns, nnz, tets. ldlt and gauss-seidel are
 // skipped (with a message) where they would take more than about a minute. The label of auto names its choice
-// and its estimates.
+// and its estimates; cg-amg's names its levels (unknowns and stored entries, finest first).
 //
 // BM_SpMV/<morph>/<size>: the TBB SpMV every iterative backend runs, with the bytes it must move
 // (symmetric_multiply_bytes) per second as GB/s. The largest matrix (~47 MB) fits in this machine's 105 MB L3, so

@@ -32,12 +32,13 @@ void barycentric_gradients(const Points4& V, const TetIndices& T, Eigen::MatrixX
 SparseMatrixD cotangent_stiffness(const Points4& V, const TetIndices& T);
 
 struct LaplaceOptions {
-  std::string solver = "cg-agg";  ///< backend name for make_solver. cg-agg was the fastest on 8 of the 9 morph
-                                  ///< systems of bench/bench_solve.cpp (0.2M-1.7M tets, to residual 1e-8; 1.1-1.45x
-                                  ///< faster than cg, tied at 0.2M sphere->torus), cg many times faster than cholmod,
-                                  ///< ldlt and gauss-seidel
+  std::string solver = "cg-amg";  ///< backend name for make_solver. In one interleaved bench/bench_solve.cpp run over
+                                  ///< the 9 morph systems (0.2M-1.7M tets, to residual 1e-8, medians of 5) cg-amg
+                                  ///< took 6-8x fewer iterations than cg and 1.5-2.2x less time from 0.7M tets up;
+                                  ///< at 0.2M it tied with cg (0.9-1.2x). 180-410x faster than ldlt, 4-7x than
+                                  ///< gauss-seidel, 10-24x than cholmod
   SolveOptions solve;             ///< tolerance, iteration limit and (gauss-seidel) change threshold
-  bool warm_start = true;         ///< iterative backends (cg, cg-ic, gauss-seidel, auto) start from s = t instead of 0
+  bool warm_start = true;  ///< iterative backends (cg, cg-ic, cg-amg, gauss-seidel, auto) start from s = t instead of 0
 };
 
 /// The Dirichlet problem of solve_harmonic as one linear system A x = b over the unknowns: the interior vertices

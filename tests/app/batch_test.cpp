@@ -276,7 +276,7 @@ TEST_F(Batch, FailingJobsAreRecordedAndTheBatchGoesOn) {
   EXPECT_EQ(cell(csv, 3, "status"), "ok");
   EXPECT_GT(std::stoll(cell(csv, 3, "tets")), 0);
   EXPECT_EQ(cell(csv, 3, "time_steps"), "2");
-  EXPECT_EQ(cell(csv, 3, "solve_backend"), "cg-agg");
+  EXPECT_EQ(cell(csv, 3, "solve_backend"), "cg-amg");
   EXPECT_GT(std::stoi(cell(csv, 3, "diffusion_iterations")), 0);
   EXPECT_LT(std::stod(cell(csv, 3, "diffusion_conv")), 1e-5);
   EXPECT_GT(std::stoll(cell(csv, 3, "peak_memory_bytes")), 0);

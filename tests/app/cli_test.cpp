@@ -10,6 +10,7 @@
 #include <cstdio>
 #include <filesystem>
 #include <fstream>
+#include <map>
 #include <nlohmann/json.hpp>
 #include <sstream>
 #include <string>
@@ -171,6 +172,24 @@ TEST_F(Cli, StretchReadsAMapAndRejectsBadLabels) {
   EXPECT_NE(bad.output.find("short.txt"), std::string::npos) << bad.output;
 }
 
+TEST_F(Cli, ChangeThresholdStopsGaussSeidel) {
+  // The paper's stopping rule: a larger threshold stops the diffusion after fewer sweeps, each run below its own.
+  std::map<double, nlohmann::json> solver;
+  for (double threshold : {1e-3, 1e-5}) {
+    const fs::path out = dir_ / ("gs" + std::to_string(threshold));
+    std::ostringstream args;
+    args << "map sphere torus -o " << out.string() << " --voxels 12 --time-steps 4 --solver gauss-seidel"
+         << " --change-threshold " << threshold;
+    const CommandRun r = run_command(args.str());
+    ASSERT_EQ(r.status, 0) << r.output;
+    solver[threshold] = nlohmann::json::parse(std::ifstream(out / "report.json"))["solver"];
+    EXPECT_EQ(solver[threshold]["name"], "gauss-seidel");
+    EXPECT_LT(solver[threshold]["change"].get<double>(), threshold);
+  }
+  EXPECT_LT(solver[1e-3]["iterations"].get<int>(), solver[1e-5]["iterations"].get<int>());
+  expect_rejected("sphere torus --change-threshold 0", "change-threshold");
+}
+
 TEST_F(Cli, HelpOnEveryCommand) {
   for (const char* cmd : {"--help", "map --help", "demo --help"}) {
     const CommandRun r = run_command(cmd);
@@ -189,7 +208,7 @@ TEST_F(Cli, DemoWritesEveryOutput) {
   const nlohmann::json report = nlohmann::json::parse(std::ifstream(out / "report.json"));
   for (const char* key : {"vertices", "tets", "target_vertices", "target_triangles"})
     EXPECT_GT(report["counts"][key].get<std::int64_t>(), 0) << key;
-  EXPECT_EQ(report["solver"]["name"], "cg-agg");
+  EXPECT_EQ(report["solver"]["name"], "cg-amg");
   EXPECT_TRUE(report["transport"].contains("fallbacks"));
   EXPECT_GT(report["peak_memory_bytes"].get<std::int64_t>(), 0);
   // labels.txt has one line per vertex of target.obj.
