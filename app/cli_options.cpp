@@ -15,7 +15,7 @@ void add_pipeline_options(CLI::App& cmd, PipelineOptions& o) {
       ->check(CLI::Range(1, 4096))
       ->capture_default_str();
   cmd.add_option("--time-scale", o.extract.time_scale,
-                 "Length of one unit of morph time in R^4 (c); 0 = time-steps x voxel size (cubic cells)")
+                 "Length of one unit of morph time in R^4 (c); 0 = the larger side of the shapes' union bounding box")
       ->check(CLI::NonNegativeNumber)
       ->capture_default_str();
   cmd.add_option("--zero-snap", o.extract.zero_snap,

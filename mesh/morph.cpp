@@ -31,7 +31,7 @@ openvdb::FloatGrid::Ptr signed_distance_grid(const Surface& surface, const openv
     triangles[f] = openvdb::Vec3I(surface.F(f, 0), surface.F(f, 1), surface.F(f, 2));
   const std::vector<openvdb::Vec4I> quads;
   return openvdb::tools::meshToSignedDistanceField<openvdb::FloatGrid>(xform, points, triangles, quads, band_voxels,
-                                                                        band_voxels);
+                                                                       band_voxels);
 }
 
 // Copies grid values at lattice points into a dense array (x fastest), one accessor per task.
@@ -152,10 +152,10 @@ MorphResult build_morph(const Surface& A, const Surface& B, const MorphOptions& 
   MorphResult result;
   MorphField& field = result.field;
   field.voxel_size = options.voxel_size > 0.0 ? options.voxel_size : extent / options.voxels;
+  field.extent = extent;
   const double h = field.voxel_size;
   field.origin = box.min() - options.padding * h * Eigen::Vector3d::Ones();
-  for (int a = 0; a < 3; ++a)
-    field.dims(a) = int(std::ceil(box.sizes()(a) / h - 1e-9)) + 1 + 2 * options.padding;
+  for (int a = 0; a < 3; ++a) field.dims(a) = int(std::ceil(box.sizes()(a) / h - 1e-9)) + 1 + 2 * options.padding;
 
   // Index (0,0,0) of the grid sits at the lattice origin, so lattice points are voxel centres.
   auto xform = openvdb::math::Transform::createLinearTransform(h);

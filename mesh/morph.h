@@ -14,10 +14,10 @@
 namespace morphmap {
 
 struct MorphOptions {
-  int voxels = 40;              ///< lattice voxels across the larger side of the union bounding box (demo: 2.4M tets, 10 s)
-  double voxel_size = 0.0;      ///< explicit voxel size h; overrides `voxels` when > 0
-  int padding = 2;              ///< voxels of margin around the union bounding box (d > 0 there)
-  double band = 3.0;            ///< OpenVDB narrow-band half width in voxels; exact distances are filled in beyond it
+  int voxels = 40;          ///< lattice voxels across the larger side of the union bounding box (demo: 2.4M tets, 10 s)
+  double voxel_size = 0.0;  ///< explicit voxel size h; overrides `voxels` when > 0
+  int padding = 2;          ///< voxels of margin around the union bounding box (d > 0 there)
+  double band = 3.0;        ///< OpenVDB narrow-band half width in voxels; exact distances are filled in beyond it
 };
 
 /// Signed distances of A and B (negative inside) on the lattice points origin + h * (i, j, k).
@@ -26,18 +26,21 @@ struct MorphOptions {
 /// +-band voxels elsewhere, where they cannot influence the zero set.
 struct MorphField {
   Eigen::Vector3d origin = Eigen::Vector3d::Zero();  ///< world position of lattice point (0, 0, 0)
-  double voxel_size = 0.0;                            ///< h
-  Eigen::Vector3i dims = Eigen::Vector3i::Zero();     ///< lattice points along x, y, z
+  double voxel_size = 0.0;                           ///< h
+  double extent = 0.0;  ///< larger side of the union bounding box of A and B (0: unknown), the default time scale
+  Eigen::Vector3i dims = Eigen::Vector3i::Zero();  ///< lattice points along x, y, z
   std::vector<float> dA;  ///< dims.prod() values, x fastest: index = i + dims.x * (j + dims.y * k)
   std::vector<float> dB;  ///< same layout as dA
 
-  std::int64_t index(int i, int j, int k) const { return i + std::int64_t(dims.x()) * (j + std::int64_t(dims.y()) * k); }
+  std::int64_t index(int i, int j, int k) const {
+    return i + std::int64_t(dims.x()) * (j + std::int64_t(dims.y()) * k);
+  }
   Eigen::Vector3d point(int i, int j, int k) const { return origin + voxel_size * Eigen::Vector3d(i, j, k); }
 };
 
 struct MorphResult {
   MorphField field;
-  double seconds = 0.0;          ///< wall time of the stage
+  double seconds = 0.0;  ///< wall time of the stage
   std::int64_t lattice_points = 0;
   std::int64_t exact_queries = 0;  ///< closest-point queries made beyond the narrow band
 };
