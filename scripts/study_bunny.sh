@@ -22,10 +22,10 @@ out="$(cd "$out" && pwd)"
 bin="${MORPHMAP:-$repo/build/morphmap}"
 [ -x "$bin" ] || { bash "$repo/scripts/build.sh" morphmap >&2; bin="$repo/build/morphmap"; }
 
-# V:K:m:method. One at a time around 40 voxels, 8 steps, m = 1, for both transfer methods, then finer lattices.
-grid="${GRID:-40:8:1:upwind 40:8:1:trace 40:8:0.25:upwind 40:8:0.25:trace 40:8:0.5:upwind 40:8:2:upwind 40:8:2:trace
-40:8:4:upwind 40:8:4:trace 40:4:1:upwind 40:16:1:upwind 40:16:1:trace 30:8:1:upwind 60:8:1:upwind 60:8:1:trace
-80:8:1:upwind 80:8:1:trace 80:16:1:upwind 80:16:1:trace 100:8:1:upwind}"
+# V:K:m:method. The defaults (40 voxels, 8 steps, c = the bounding box's larger side, i.e. m = 5, traced), each
+# setting varied alone, the paper's upwind sweep beside, then finer lattices.
+grid="${GRID:-40:8:5:trace 40:8:5:upwind 40:8:1:trace 40:8:1:upwind 40:8:0.25:trace 40:8:2:trace 40:8:10:trace
+40:4:5:trace 40:16:5:trace 30:8:5:trace 60:8:5:trace 60:8:5:upwind 80:8:5:trace 80:16:5:trace}"
 
 run() {  # V K m method -> out/vV-kK-cm-method/report.json
   local v=$1 k=$2 m=$3 method=$4 c dir
