@@ -14,8 +14,9 @@ void add_pipeline_options(CLI::App& cmd, PipelineOptions& o) {
   cmd.add_option("--time-steps", o.extract.time_steps, "Lattice intervals along the morph time t")
       ->check(CLI::Range(1, 4096))
       ->capture_default_str();
-  cmd.add_option("--time-scale", o.extract.time_scale,
-                 "Length of one unit of morph time in R^4 (c); 0 = the larger side of the shapes' union bounding box")
+  cmd.add_option(
+         "--time-scale", o.extract.time_scale,
+         "Length of one unit of morph time in R^4 (c); 0 = twice the larger side of the shapes' union bounding box")
       ->check(CLI::NonNegativeNumber)
       ->capture_default_str();
   cmd.add_option("--zero-snap", o.extract.zero_snap,

@@ -12,10 +12,10 @@ namespace morphmap {
 
 struct ExtractOptions {
   int time_steps = 8;  ///< K: lattice intervals along t in [0, 1]
-  /// c (length per unit t); <= 0 selects the default: the larger side of the shapes' union bounding box
-  /// (field.extent; K * h, cubic cells, when unknown). Measured on sphere -> bunny (scripts/study_bunny.sh, README):
-  /// from c = 8 h (cubic cells at 40 voxels, 8 steps) to c = box the traced map's 99th-percentile L2 stretch fell
-  /// from 22 to 3.5 and its mean from 7e4 to 1.22, with the same run time.
+  /// c (length per unit t); <= 0 selects the default: twice the larger side of the shapes' union bounding box
+  /// (field.extent; K * h, cubic cells, when unknown). Measured on sphere -> bunny (scripts/study_bunny.sh, README,
+  /// traced map, 40 voxels, 8 steps): c = 8 h (cubic cells) p99 L2 stretch 22, mean 7e4; c = box 3.47, 1.22;
+  /// 2 box 3.34, 1.21 (best on every figure); 4 box 3.66, 1.29.
   double time_scale = 0.0;
   /// |d| < zero_snap * h moves to +-zero_snap * h: crossings, and the slivers they make, stay off lattice points.
   /// Measured on concentric spheres (1 -> 2, 40 voxels, traced map): 0.01 leaves 0.01 h triangles whose preimages
