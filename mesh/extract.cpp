@@ -245,7 +245,7 @@ ExtractResult extract_hypersurface(const MorphField& field, const ExtractOptions
   mesh.time_steps = K;
   mesh.voxel_size = field.voxel_size;
   mesh.time_scale = options.time_scale > 0.0 ? options.time_scale
-                    : field.extent > 0.0     ? field.extent
+                    : field.extent > 0.0     ? 2.0 * field.extent
                                              : K * field.voxel_size;
   const Lattice lat{field,
                     K,
