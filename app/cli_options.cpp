@@ -35,8 +35,9 @@ void add_pipeline_options(CLI::App& cmd, PipelineOptions& o) {
       ->check(CLI::PositiveNumber)
       ->capture_default_str();
   cmd.add_option("--change-threshold", o.laplace.solve.change_threshold,
-                 "gauss-seidel stops once the mean change of s per unknown in a sweep is below this")
-      ->check(CLI::PositiveNumber)
+                 "gauss-seidel stops once the mean change of s per unknown in a sweep is below this (0: after "
+                 "--max-iterations sweeps)")
+      ->check(CLI::NonNegativeNumber)
       ->capture_default_str();
   cmd.add_option("--slices", o.slices, "Morph times in (0,1) at which to write slice_<t>.obj")->delimiter(',');
   cmd.add_option("--align", o.align,

@@ -23,33 +23,36 @@ bin="${MORPHMAP:-$repo/build/morphmap}"
 extra="${MAP_OPTIONS:-}"
 target="$models/bunny_closed.obj"
 
-run() {  # name, options...
+run() {  # name, options...; a finished run with the same arguments is kept (rerunning resumes)
   local name=$1
   shift
+  local args="$* $extra"
+  if [ -f "$out/$name/report.json" ] && [ "$(cat "$out/$name.args" 2>/dev/null)" = "$args" ]; then return 0; fi
+  rm -rf "${out:?}/$name"
   echo "table1: $name" >&2
   # shellcheck disable=SC2086
   if ! "$bin" map sphere "$target" -o "$out/$name" "$@" $extra >"$out/$name.log" 2>&1; then
     echo "table1: $name failed, see $out/$name.log" >&2
     return 1
   fi
+  echo "$args" >"$out/$name.args"
 }
 
 run closest-point --method closest-point
 for n in 1 10 100; do
-  # After at most 100 sweeps the mean change is far above the default stopping threshold (1e-5), so each run
-  # makes exactly n sweeps.
-  run "gauss-seidel-$n" --solver gauss-seidel --max-iterations "$n"
+  # --change-threshold 0: exactly n sweeps (the default threshold 1e-5 can stop them earlier).
+  run "gauss-seidel-$n" --solver gauss-seidel --max-iterations "$n" --change-threshold 0
 done
 run converged
 
 row() {  # label, run name, convergence expression, paper row
   local r="$out/$2/report.json"
-  jq -r --arg label "$1" --arg paper "$4" '
+  jq -r --arg title "$1" --arg paper "$4" '
     def g: if . == null then "–" elif . == 0 then "0" else (fabs | log10 | floor) as $e |
       if $e >= 4 or $e < -3 then "\((. / pow(10; $e) * 100 | round) / 100)e\($e)" elif $e >= 2 then (round | tostring)
       else ((. * pow(10; 2 - $e) | round) / pow(10; 2 - $e) | tostring) end end;
     .stretch as $s |
-    "| \($label) | \('"$3"' | g) | \(.seconds.total * 10 | round / 10) | \((.seconds.laplace // 0) * 10 | round / 10)"
+    "| \($title) (\(.solver.iterations) it.) | \('"$3"' | g) | \(.seconds.total * 10 | round / 10) | \((.seconds.laplace // 0) * 10 | round / 10)"
     + " | \($s.min_compression | g) | \($s.max_stretch | g) | \($s.mean_l2 | g) | \($s.variance_l2 | g)"
     + " | \($s.l2_median | g) | \($s.l2_p99 | g) | \($s.folded) | \($s.collapsed) | \($s.coverage * 1000 | round / 1000) | \($paper) |"' "$r"
 }
@@ -61,8 +64,8 @@ echo "Stretch as ../shared/DESIGN.md defines it, on target.obj (the seam-split e
 echo
 echo "| row | convergence | seconds | laplace s | min | max | mean | variance | median | p99 | folded | collapsed | coverage | paper (conv., s, min, max, mean, var) |"
 echo "|---|--:|--:|--:|--:|--:|--:|--:|--:|--:|--:|--:|--:|---|"
-row "closest point" "null" "closest-point" "–"
-row "Gauss-Seidel, 1 sweep" ".solver.change" "gauss-seidel-1" "0.010904, 9, 0.0121, 99.8, 1.787, 7.62"
-row "Gauss-Seidel, 10 sweeps" ".solver.change" "gauss-seidel-10" "0.001187, 9, 0.139, 51.2, 1.613, 2.48"
-row "Gauss-Seidel, 100 sweeps" ".solver.change" "gauss-seidel-100" "0.000204, 16, 0.163, 19.1, 1.508, 1.11"
-row "converged ($(jq -r .solver.name "$first"))" ".solver.residual" "converged" "3 implicit: 0.000037, 16, 0.152, 26.4, 1.550, 1.46"
+row "closest point" "closest-point" "null" "–"
+row "Gauss-Seidel, 1 sweep" "gauss-seidel-1" ".solver.change" "0.010904, 9, 0.0121, 99.8, 1.787, 7.62"
+row "Gauss-Seidel, 10 sweeps" "gauss-seidel-10" ".solver.change" "0.001187, 9, 0.139, 51.2, 1.613, 2.48"
+row "Gauss-Seidel, 100 sweeps" "gauss-seidel-100" ".solver.change" "0.000204, 16, 0.163, 19.1, 1.508, 1.11"
+row "converged ($(jq -r .solver.name "$first"))" "converged" ".solver.residual" "3 implicit: 0.000037, 16, 0.152, 26.4, 1.550, 1.46"

@@ -187,7 +187,7 @@ TEST_F(Cli, ChangeThresholdStopsGaussSeidel) {
     EXPECT_LT(solver[threshold]["change"].get<double>(), threshold);
   }
   EXPECT_LT(solver[1e-3]["iterations"].get<int>(), solver[1e-5]["iterations"].get<int>());
-  expect_rejected("sphere torus --change-threshold 0", "change-threshold");
+  expect_rejected("sphere torus --change-threshold -1", "change-threshold");
 }
 
 TEST_F(Cli, HelpOnEveryCommand) {
