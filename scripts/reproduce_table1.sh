@@ -8,18 +8,8 @@
 # for the converged row it is the relative residual of the linear system. Seconds: the whole map, and the
 # Laplace stage (assembly + solve) within it.
 set -euo pipefail
-if [ $# -lt 1 ] || [ ! -f "$1/bunny_closed.obj" ]; then
-  echo "usage: $0 MODELS_DIR [OUT_DIR]  (MODELS_DIR holds bunny_closed.obj)" >&2
-  exit 2
-fi
-command -v jq >/dev/null || { echo "$0: needs jq (scripts/setup.sh installs it)" >&2; exit 2; }
-models="$(cd "$1" && pwd)"
-repo="$(cd "$(dirname "$0")/.." && pwd)"
-out="${2:-$repo/out/table1}"
-mkdir -p "$out"
-out="$(cd "$out" && pwd)"
-bin="${MORPHMAP:-$repo/build/morphmap}"
-[ -x "$bin" ] || { bash "$repo/scripts/build.sh" morphmap >&2; bin="$repo/build/morphmap"; }
+# shellcheck source=scripts/bunny_args.sh
+source "$(dirname "$0")/bunny_args.sh" table1 "$@"
 extra="${MAP_OPTIONS:-}"
 target="$models/bunny_closed.obj"
 

@@ -9,18 +9,8 @@
 # only V or K keep the same continuous hypersurface and show the discretisation alone; the column c/Kh is the
 # multiple of each row's own default (K * h, cubic 4D cells).
 set -euo pipefail
-if [ $# -lt 1 ] || [ ! -f "$1/bunny_closed.obj" ]; then
-  echo "usage: $0 MODELS_DIR [OUT_DIR]  (MODELS_DIR holds bunny_closed.obj)" >&2
-  exit 2
-fi
-command -v jq >/dev/null || { echo "$0: needs jq (scripts/setup.sh installs it)" >&2; exit 2; }
-models="$(cd "$1" && pwd)"
-repo="$(cd "$(dirname "$0")/.." && pwd)"
-out="${2:-$repo/out/study}"
-mkdir -p "$out"
-out="$(cd "$out" && pwd)"
-bin="${MORPHMAP:-$repo/build/morphmap}"
-[ -x "$bin" ] || { bash "$repo/scripts/build.sh" morphmap >&2; bin="$repo/build/morphmap"; }
+# shellcheck source=scripts/bunny_args.sh
+source "$(dirname "$0")/bunny_args.sh" study "$@"
 
 # V:K:m:method. The defaults (40 voxels, 8 steps, c = the bounding box's larger side, i.e. m = 5, traced), each
 # setting varied alone, the paper's upwind sweep beside, then finer lattices.

@@ -11,22 +11,7 @@ namespace {
 using test_mesh::icosphere;
 using test_mesh::octahedron;
 using test_mesh::product_mesh;
-
-// `extra` appended to `main` as a second component, its tau shifted by `shift`, with its ends relabelled.
-TetMesh4 with_component(const TetMesh4& main, TetMesh4 extra, double shift, VertexSide keep) {
-  extra.V.col(3).array() += shift;
-  extra.V.col(0).array() += 5.0;
-  for (auto& side : extra.side)
-    if (side != keep) side = VertexSide::Interior;
-  TetMesh4 mesh = main;
-  const Eigen::Index nm = main.vertex_count();
-  mesh.V.resize(nm + extra.vertex_count(), 4);
-  mesh.V << main.V, extra.V;
-  mesh.T.resize(main.tet_count() + extra.tet_count(), 4);
-  mesh.T << main.T, (extra.T.array() + int(nm)).matrix();
-  mesh.side.insert(mesh.side.end(), extra.side.begin(), extra.side.end());
-  return mesh;
-}
+using test_mesh::with_component;
 
 TEST(Adjacency, StarsListEveryIncidentTetOnceInOrder) {
   const TetMesh4 mesh = product_mesh(octahedron(), 2, 1.0);

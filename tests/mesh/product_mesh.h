@@ -114,6 +114,26 @@ inline TetMesh4 product_mesh(const TriSurface& surface, int layers, double c, do
   return mesh;
 }
 
+/// s = t, the Dirichlet data extended linearly: the start of Gauss-Seidel and a harmonic field on products.
+inline Eigen::VectorXd time_field(const TetMesh4& mesh) { return mesh.V.col(3) / mesh.time_scale; }
+
+/// `main` with `extra` appended as a second component: extra's tau shifted by `shift`, its x by 5, and every
+/// vertex of it not on side `keep` made interior (a component born mid-morph keeps B, a vanishing one A).
+inline TetMesh4 with_component(const TetMesh4& main, TetMesh4 extra, double shift, VertexSide keep) {
+  extra.V.col(3).array() += shift;
+  extra.V.col(0).array() += 5.0;
+  for (auto& side : extra.side)
+    if (side != keep) side = VertexSide::Interior;
+  TetMesh4 mesh = main;
+  const Eigen::Index nm = main.vertex_count();
+  mesh.V.resize(nm + extra.vertex_count(), 4);
+  mesh.V << main.V, extra.V;
+  mesh.T.resize(main.tet_count() + extra.tet_count(), 4);
+  mesh.T << main.T, (extra.T.array() + int(nm)).matrix();
+  mesh.side.insert(mesh.side.end(), extra.side.begin(), extra.side.end());
+  return mesh;
+}
+
 /// Per-vertex unit field from volume-weighted per-tet gradients of s (affine least-norm form).
 inline Eigen::MatrixXd gradient_field(const TetMesh4& mesh, const Eigen::VectorXd& s) {
   Eigen::MatrixXd field = Eigen::MatrixXd::Zero(mesh.vertex_count(), 4);

@@ -19,7 +19,7 @@ using test_mesh::icosphere;
 using test_mesh::octahedron;
 using test_mesh::product_mesh;
 
-Eigen::VectorXd time_field(const TetMesh4& mesh) { return mesh.V.col(3) / mesh.time_scale; }
+using test_mesh::time_field;
 
 // One start per side-B vertex, in vertex order.
 std::vector<MeshPoint> b_vertices(const TetMesh4& mesh, std::vector<int>& ids) {

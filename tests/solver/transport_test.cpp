@@ -18,7 +18,7 @@ using test_mesh::icosphere;
 using test_mesh::octahedron;
 using test_mesh::product_mesh;
 
-Eigen::VectorXd time_field(const TetMesh4& mesh) { return mesh.V.col(3) / mesh.time_scale; }
+using test_mesh::time_field;
 
 Eigen::Vector3d own_position(const Eigen::Vector3d& x) { return x; }
 
@@ -147,19 +147,9 @@ TEST(TransportTest, SweepIsCausalForPerturbedField) {
 TEST(TransportTest, BornComponentTakesUnreachedLabelAndKeepsItConstant) {
   const TetMesh4 main_mesh = product_mesh(icosphere(1), 4, 1.0);
   // A small octahedron that exists only for t in [0.5, 1]: no vertex of it touches A.
-  TetMesh4 born = product_mesh(octahedron(), 2, 0.5, 0.3, 0.3);
-  born.V.col(3).array() += 0.5;
-  born.V.col(0).array() += 5.0;
-  for (auto& side : born.side)
-    if (side == VertexSide::A) side = VertexSide::Interior;
-
-  TetMesh4 mesh = main_mesh;
+  const TetMesh4 mesh =
+      test_mesh::with_component(main_mesh, product_mesh(octahedron(), 2, 0.5, 0.3, 0.3), 0.5, VertexSide::B);
   const Eigen::Index nm = main_mesh.vertex_count();
-  mesh.V.resize(nm + born.vertex_count(), 4);
-  mesh.V << main_mesh.V, born.V;
-  mesh.T.resize(main_mesh.tet_count() + born.tet_count(), 4);
-  mesh.T << main_mesh.T, (born.T.array() + int(nm)).matrix();
-  mesh.side.insert(mesh.side.end(), born.side.begin(), born.side.end());
 
   const Eigen::Vector3d constant(7.0, 7.0, 7.0);
   int calls = 0;
