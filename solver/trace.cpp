@@ -159,8 +159,9 @@ struct Stats {
 
 class Tracer {
  public:
-  Tracer(const TetMesh4& mesh, const Eigen::MatrixXd& field, const TraceOptions& options)
+  Tracer(const TetMesh4& mesh, const Eigen::VectorXd& s, const Eigen::MatrixXd& field, const TraceOptions& options)
       : mesh_(mesh),
+        s_(s),
         options_(options),
         adj_(build_vertex_tets(mesh.T, mesh.vertex_count())),
         normals_(vertex_normals(mesh, adj_)) {
@@ -185,6 +186,7 @@ class Tracer {
     // Supports (sorted ids) before the last two pieces: a piece that returns the point to the support it had two
     // pieces ago (along an edge and back, where the field converges from both ends) is a stagnation point.
     std::array<int, 4> before_last{{-2, -2, -2, -2}}, last{{-2, -2, -2, -2}};
+    double s_checkpoint = 0.0;
     for (int step = 0;; ++step) {
       end = MeshPoint{};
       for (int k = 0; k < n; ++k) {
@@ -197,6 +199,12 @@ class Tracer {
       if (step >= options_.max_steps) return TraceStatus::Stalled;
       const std::array<int, 4> key = support_key(ids, n);
       if (n < 3 && key == before_last) return TraceStatus::Stalled;
+      if (step % options_.progress_window == 0) {
+        double s_now = 0.0;
+        for (int k = 0; k < n; ++k) s_now += w[std::size_t(k)] * s_(ids[std::size_t(k)]);
+        if (step > 0 && !(s_now < s_checkpoint - options_.progress)) return TraceStatus::Stalled;
+        s_checkpoint = s_now;
+      }
       before_last = last;
       last = key;
       Simplex piece;
@@ -396,6 +404,7 @@ class Tracer {
   }
 
   const TetMesh4& mesh_;
+  const Eigen::VectorXd& s_;
   const TraceOptions& options_;
   Eigen::MatrixXd field_;  // #V by 4, smoothed
   VertexTets adj_;
@@ -420,7 +429,7 @@ std::vector<MeshPoint> edge_points(const Eigen::MatrixXi& edge, const Eigen::Vec
   return points;
 }
 
-TraceResult trace_to_source(const TetMesh4& mesh, const Eigen::MatrixXd& vertex_field,
+TraceResult trace_to_source(const TetMesh4& mesh, const Eigen::VectorXd& s, const Eigen::MatrixXd& vertex_field,
                             const std::vector<MeshPoint>& starts, const TraceOptions& options) {
   const auto start_time = std::chrono::steady_clock::now();
   const Eigen::Index nv = mesh.vertex_count();
@@ -428,7 +437,10 @@ TraceResult trace_to_source(const TetMesh4& mesh, const Eigen::MatrixXd& vertex_
     throw InvalidInput("trace_to_source: vertex_field must be #V by 4 (" + std::to_string(nv) + " vertices)");
   if (mesh.side.size() != std::size_t(nv)) throw InvalidInput("trace_to_source: mesh.side must have #V entries");
   if (!vertex_field.allFinite()) throw InvalidInput("trace_to_source: vertex_field is not finite");
-  const Tracer tracer(mesh, vertex_field, options);
+  if (s.size() != nv || !s.allFinite())
+    throw InvalidInput("trace_to_source: s must have one finite value per vertex (" + std::to_string(nv) + ")");
+  if (options.progress_window < 1) throw InvalidInput("trace_to_source: progress_window must be at least 1");
+  const Tracer tracer(mesh, s, vertex_field, options);
   const std::size_t count = starts.size();
   TraceResult result;
   result.end = Eigen::MatrixXd::Zero(Eigen::Index(count), 3);

@@ -52,7 +52,7 @@ TEST(TraceTest, IdentityMorphTracesEveryPointStraightBack) {
     p.weights = {{0.5, 0.5, 0.0, 0.0}};
     starts.push_back(p);
   }
-  const TraceResult r = trace_to_source(mesh, field, starts);
+  const TraceResult r = trace_to_source(mesh, time_field(mesh), field, starts);
   ASSERT_EQ(r.end.rows(), Eigen::Index(starts.size()));
   EXPECT_EQ(r.reached, std::int64_t(starts.size()));
   for (std::size_t i = 0; i < starts.size(); ++i) {
@@ -89,7 +89,7 @@ TEST(TraceTest, ConcentricSpheresTraceRadiallyLikeTheUpwindSweep) {
   const Eigen::VectorXd s = time_field(mesh);
   const Eigen::MatrixXd field = gradient_field(mesh, s);
   std::vector<int> ids;
-  const TraceResult r = trace_to_source(mesh, field, b_vertices(mesh, ids));
+  const TraceResult r = trace_to_source(mesh, s, field, b_vertices(mesh, ids));
   EXPECT_EQ(r.reached, std::int64_t(ids.size()));
   EXPECT_GT(r.tet_pieces, std::int64_t(ids.size()));
   const double traced = worst_radial(sphere, ids, r.end);
@@ -112,9 +112,9 @@ TEST(TraceTest, ResultDoesNotDependOnThreadCount) {
   TraceResult one;
   {
     tbb::global_control limit(tbb::global_control::max_allowed_parallelism, 1);
-    one = trace_to_source(mesh, field, starts);
+    one = trace_to_source(mesh, time_field(mesh), field, starts);
   }
-  const TraceResult many = trace_to_source(mesh, field, starts);
+  const TraceResult many = trace_to_source(mesh, time_field(mesh), field, starts);
   EXPECT_EQ((one.end - many.end).cwiseAbs().maxCoeff(), 0.0);
   EXPECT_EQ(one.tet_pieces, many.tet_pieces);
   EXPECT_EQ(one.face_pieces, many.face_pieces);
@@ -133,7 +133,7 @@ TEST(TraceTest, StallsWhereTheFieldVanishesAndRejectsBadStarts) {
   outside.ids[0] = int(mesh.vertex_count());
   outside.weights[0] = 1.0;
   starts.push_back(outside);
-  const TraceResult r = trace_to_source(mesh, zero, starts);
+  const TraceResult r = trace_to_source(mesh, time_field(mesh), zero, starts);
   EXPECT_EQ(r.stalled, std::int64_t(ids.size()));
   EXPECT_EQ(r.invalid, 2);
   EXPECT_EQ(r.status[ids.size()], TraceStatus::Invalid);
@@ -141,7 +141,23 @@ TEST(TraceTest, StallsWhereTheFieldVanishesAndRejectsBadStarts) {
     EXPECT_EQ(r.status[i], TraceStatus::Stalled);
     EXPECT_EQ(r.end_point[i].ids[0], ids[i]);  // stalled where it started
   }
-  EXPECT_THROW(trace_to_source(mesh, Eigen::MatrixXd::Zero(3, 4), starts), InvalidInput);
+  EXPECT_THROW(trace_to_source(mesh, time_field(mesh), Eigen::MatrixXd::Zero(3, 4), starts), InvalidInput);
+}
+
+TEST(TraceTest, TracesCirclingAStagnantFieldStallAfterOneProgressWindow) {
+  // T turns around the z axis within each time layer: s = t never falls along it.
+  const TetMesh4 mesh = product_mesh(icosphere(2), 3, 1.0);
+  Eigen::MatrixXd field = Eigen::MatrixXd::Zero(mesh.vertex_count(), 4);
+  field.col(0) = -mesh.V.col(1);
+  field.col(1) = mesh.V.col(0);
+  std::vector<int> ids;
+  const std::vector<MeshPoint> starts = b_vertices(mesh, ids);
+  TraceOptions options;
+  options.progress_window = 64;
+  const TraceResult r = trace_to_source(mesh, time_field(mesh), field, starts, options);
+  EXPECT_EQ(r.reached, 0);
+  EXPECT_EQ(r.stalled, std::int64_t(starts.size()));
+  EXPECT_LE(r.max_pieces, options.progress_window + 1);
 }
 
 TEST(TraceTest, EdgePointsSplitSliceVerticesOverTheirEdges) {
