@@ -395,6 +395,12 @@ PipelineResult run_pipeline(const PipelineOptions& options) {
     vertex_traced.assign(std::size_t(mesh.vertex_count()), 0);
   }
   const Eigen::MatrixXd& seam_labels = options.method == "trace" ? mesh_labels : transport.labels;
+  // Built once for the target and every slice.
+  std::optional<CharacteristicTracer> tracer;
+  if (options.method == "trace") {
+    tracer.emplace(mesh, laplace.s, gradient.vertex_field, options.trace);
+    traced_total.seconds += tracer->setup_seconds();
+  }
   auto add_trace = [&](const TraceResult& traced) {
     traced_total.reached += traced.reached;
     traced_total.stalled += traced.stalled;
@@ -425,7 +431,7 @@ PipelineResult run_pipeline(const PipelineOptions& options) {
         p.weights[0] = 1.0;
         starts.push_back(p);
       }
-    const TraceResult traced = trace_to_source(mesh, laplace.s, gradient.vertex_field, starts, options.trace);
+    const TraceResult traced = tracer->trace(starts);
     for (std::size_t i = 0; i < own; ++i) slice.labels.row(Eigen::Index(i)) = label_at(traced, i);
     for (std::size_t j = 0; j < vertices.size(); ++j) mesh_labels.row(vertices[j]) = label_at(traced, own + j);
     add_trace(traced);
@@ -440,7 +446,7 @@ PipelineResult run_pipeline(const PipelineOptions& options) {
     result.target = user_target_mesh(options, frame_b, result.target, [&](const std::vector<MeshPoint>& points) {
       Eigen::MatrixXd labels(Eigen::Index(points.size()), 3);
       if (options.method == "trace") {
-        const TraceResult traced = trace_to_source(mesh, laplace.s, gradient.vertex_field, points, options.trace);
+        const TraceResult traced = tracer->trace(points);
         for (std::size_t i = 0; i < points.size(); ++i) labels.row(Eigen::Index(i)) = label_at(traced, i);
         add_trace(traced);
       } else {

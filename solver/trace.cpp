@@ -429,9 +429,19 @@ std::vector<MeshPoint> edge_points(const Eigen::MatrixXi& edge, const Eigen::Vec
   return points;
 }
 
-TraceResult trace_to_source(const TetMesh4& mesh, const Eigen::VectorXd& s, const Eigen::MatrixXd& vertex_field,
-                            const std::vector<MeshPoint>& starts, const TraceOptions& options) {
-  const auto start_time = std::chrono::steady_clock::now();
+struct CharacteristicTracer::Impl {
+  Impl(const TetMesh4& mesh, const Eigen::VectorXd& s, const Eigen::MatrixXd& field, const TraceOptions& options)
+      : mesh(mesh), options(options), tracer(mesh, s, field, this->options) {}
+  const TetMesh4& mesh;
+  const TraceOptions options;  // the tracer keeps a reference to this copy
+  const Tracer tracer;
+  double setup_seconds = 0.0;
+};
+
+namespace {
+
+const TetMesh4& checked(const TetMesh4& mesh, const Eigen::VectorXd& s, const Eigen::MatrixXd& vertex_field,
+                        const TraceOptions& options) {
   const Eigen::Index nv = mesh.vertex_count();
   if (vertex_field.rows() != nv || vertex_field.cols() != 4)
     throw InvalidInput("trace_to_source: vertex_field must be #V by 4 (" + std::to_string(nv) + " vertices)");
@@ -440,7 +450,27 @@ TraceResult trace_to_source(const TetMesh4& mesh, const Eigen::VectorXd& s, cons
   if (s.size() != nv || !s.allFinite())
     throw InvalidInput("trace_to_source: s must have one finite value per vertex (" + std::to_string(nv) + ")");
   if (options.progress_window < 1) throw InvalidInput("trace_to_source: progress_window must be at least 1");
-  const Tracer tracer(mesh, s, vertex_field, options);
+  return mesh;
+}
+
+}  // namespace
+
+CharacteristicTracer::CharacteristicTracer(const TetMesh4& mesh, const Eigen::VectorXd& s,
+                                           const Eigen::MatrixXd& vertex_field, const TraceOptions& options) {
+  const auto start_time = std::chrono::steady_clock::now();
+  impl_ = std::make_unique<Impl>(checked(mesh, s, vertex_field, options), s, vertex_field, options);
+  impl_->setup_seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - start_time).count();
+}
+
+CharacteristicTracer::~CharacteristicTracer() = default;
+
+double CharacteristicTracer::setup_seconds() const { return impl_->setup_seconds; }
+
+TraceResult CharacteristicTracer::trace(const std::vector<MeshPoint>& starts) const {
+  const auto start_time = std::chrono::steady_clock::now();
+  const TetMesh4& mesh = impl_->mesh;
+  const Tracer& tracer = impl_->tracer;
+  const Eigen::Index nv = mesh.vertex_count();
   const std::size_t count = starts.size();
   TraceResult result;
   result.end = Eigen::MatrixXd::Zero(Eigen::Index(count), 3);
@@ -477,6 +507,14 @@ TraceResult trace_to_source(const TetMesh4& mesh, const Eigen::VectorXd& s, cons
     result.max_pieces = std::max(result.max_pieces, stats[i].total());
   }
   result.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - start_time).count();
+  return result;
+}
+
+TraceResult trace_to_source(const TetMesh4& mesh, const Eigen::VectorXd& s, const Eigen::MatrixXd& vertex_field,
+                            const std::vector<MeshPoint>& starts, const TraceOptions& options) {
+  const CharacteristicTracer tracer(mesh, s, vertex_field, options);
+  TraceResult result = tracer.trace(starts);
+  result.seconds += tracer.setup_seconds();
   return result;
 }
 

@@ -13,6 +13,7 @@
 #include <Eigen/Core>
 #include <array>
 #include <cstdint>
+#include <memory>
 #include <vector>
 
 #include "mesh/tet_mesh4.h"
@@ -66,6 +67,26 @@ struct TraceResult {
   double seconds = 0.0;
 };
 
+/// The tracer as a stateful object: vertex stars, vertex normals and the smoothed field are built once by the
+/// constructor (which checks the inputs and throws InvalidInput naming the problem), so the target and every slice
+/// are traced without rebuilding them. `mesh`, `s` and `vertex_field` must outlive it.
+class CharacteristicTracer {
+ public:
+  CharacteristicTracer(const TetMesh4& mesh, const Eigen::VectorXd& s, const Eigen::MatrixXd& vertex_field,
+                       const TraceOptions& options = {});
+  ~CharacteristicTracer();
+  CharacteristicTracer(const CharacteristicTracer&) = delete;
+  CharacteristicTracer& operator=(const CharacteristicTracer&) = delete;
+
+  /// Traces every start point (see trace_to_source); TraceResult::seconds covers this call only.
+  TraceResult trace(const std::vector<MeshPoint>& starts) const;
+  double setup_seconds() const;  ///< what the constructor took
+
+ private:
+  struct Impl;
+  std::unique_ptr<Impl> impl_;
+};
+
 /// Traces -T (vertex_field, #V by 4, interpolated linearly in each tet and projected into the tet's hull) from
 /// every start point back to the side-A boundary. Where the flow leaves a tet through a face whose other tet
 /// sends it back (both projections point into the face, where the 3-manifold bends), the characteristic slides
@@ -74,6 +95,7 @@ struct TraceResult {
 /// index, so the result does not depend on the thread count. Parallel over start points.
 /// `s` (#V, the harmonic field T comes from) only measures progress: a trace along which s has not fallen by
 /// TraceOptions::progress over TraceOptions::progress_window pieces circles a stagnation point and stalls.
+/// One-shot form of CharacteristicTracer (its seconds include the set-up).
 TraceResult trace_to_source(const TetMesh4& mesh, const Eigen::VectorXd& s, const Eigen::MatrixXd& vertex_field,
                             const std::vector<MeshPoint>& starts, const TraceOptions& options = {});
 
