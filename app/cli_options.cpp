@@ -1,6 +1,8 @@
 // Options of a pipeline run on the command line (see app/cli_options.h).
 #include "app/cli_options.h"
 
+#include <string>
+
 #include "solver/linear_solver.h"
 
 namespace morphmap {
@@ -35,10 +37,16 @@ void add_pipeline_options(CLI::App& cmd, PipelineOptions& o) {
       ->check(CLI::PositiveNumber)
       ->capture_default_str();
   cmd.add_option("--change-threshold", o.laplace.solve.change_threshold,
-                 "gauss-seidel stops once the mean change of s per unknown in a sweep is below this (0: after "
+                 "gauss-seidel stops once the change of s in a sweep (--change-measure) is below this (0: after "
                  "--max-iterations sweeps)")
       ->check(CLI::NonNegativeNumber)
       ->capture_default_str();
+  cmd.add_option_function<std::string>(
+         "--change-measure",
+         [&o](const std::string& name) { o.laplace.solve.change_measure = parse_change_measure(name); },
+         "gauss-seidel's change of a sweep: total (sum of |change| of s, the paper's) or mean (per unknown)")
+      ->check(CLI::IsMember({"total", "mean"}))
+      ->default_str(change_measure_name(o.laplace.solve.change_measure));
   cmd.add_option("--slices", o.slices, "Morph times in (0,1) at which to write slice_<t>.obj")->delimiter(',');
   cmd.add_option("--align", o.align,
                  "none: meshes in their own coordinates; bbox: both normalised, outputs in the target's")

@@ -29,6 +29,7 @@
 #include "mesh/stopwatch.h"
 #include "mesh/transfer.h"
 #include "solver/gradient.h"
+#include "solver/linear_solver.h"
 
 namespace morphmap {
 namespace {
@@ -557,6 +558,8 @@ PipelineResult run_pipeline(const PipelineOptions& options) {
                        {"compare_solvers", options.compare_solvers},
                        {"tolerance", options.laplace.solve.tolerance},
                        {"max_iterations", options.laplace.solve.max_iterations},
+                       {"change_threshold", options.laplace.solve.change_threshold},
+                       {"change_measure", change_measure_name(options.laplace.solve.change_measure)},
                        {"warm_start", options.laplace.warm_start},
                        {"align", options.align},
                        {"method", options.method},

@@ -4,7 +4,7 @@
 # and the converged solve, each mapped with the default options. Prints a Markdown table, ours beside the paper's.
 #   usage: scripts/reproduce_table1.sh MODELS_DIR [OUT_DIR]   (OUT_DIR defaults to out/table1)
 #   MORPHMAP=/path/to/morphmap overrides the binary; MAP_OPTIONS="--voxels 60 ..." adds options to every run.
-# Convergence is the paper's measure for the Gauss-Seidel rows (mean |change| of s per vertex in the last sweep);
+# Convergence is the paper's measure for the Gauss-Seidel rows (total |change| of s in the last sweep);
 # for the converged row it is the relative residual of the linear system. Seconds: the whole map, and the
 # Laplace stage (assembly + solve) within it.
 set -euo pipefail

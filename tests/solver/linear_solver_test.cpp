@@ -230,7 +230,7 @@ double reference_sweep(const Eigen::MatrixXd& A, const Eigen::VectorXd& b, Eigen
     total += std::abs(next - x(i));
     x(i) = next;
   }
-  return total / static_cast<double>(x.size());
+  return total;  // the paper's "total change in the scalar values"
 }
 
 TEST(LinearSolver, GaussSeidelSweepAndChangeMeasure) {
@@ -243,19 +243,28 @@ TEST(LinearSolver, GaussSeidelSweepAndChangeMeasure) {
   std::vector<double> expected_change;
   for (int sweep = 0; sweep < 3; ++sweep) expected_change.push_back(reference_sweep(dense, b, expected));
 
-  SolveOptions options;
-  options.max_iterations = 3;
-  options.change_threshold = 0.0;  // only the sweep limit stops it
-  auto solver = make_solver("gauss-seidel", options);
-  solver->compute(A);
-  Eigen::VectorXd x = start;
-  SolveReport report;
-  ASSERT_NO_THROW(report = solver->solve(b, x));  // stopping at max_iterations is not an error
-  EXPECT_EQ(report.iterations, 3);
-  EXPECT_LE((x - expected).cwiseAbs().maxCoeff(), 1e-14);
-  EXPECT_NEAR(report.change, expected_change.back(), 1e-15);
-  EXPECT_NEAR(report.residual, (b - A * x).norm() / b.norm(), 1e-15);
-  EXPECT_GT(report.residual, 1e-6);  // far from converged: the limit, not the residual, stopped it
+  for (const ChangeMeasure measure : {ChangeMeasure::Total, ChangeMeasure::Mean}) {
+    SolveOptions options;
+    options.max_iterations = 3;
+    options.change_threshold = 0.0;  // only the sweep limit stops it
+    options.change_measure = measure;
+    auto solver = make_solver("gauss-seidel", options);
+    solver->compute(A);
+    Eigen::VectorXd x = start;
+    SolveReport report;
+    ASSERT_NO_THROW(report = solver->solve(b, x));  // stopping at max_iterations is not an error
+    EXPECT_EQ(report.iterations, 3);
+    EXPECT_LE((x - expected).cwiseAbs().maxCoeff(), 1e-14);
+    const double change =
+        measure == ChangeMeasure::Total ? expected_change.back() : expected_change.back() / double(A.rows());
+    EXPECT_NEAR(report.change, change, 1e-14 * change) << change_measure_name(measure);
+    EXPECT_NEAR(report.residual, (b - A * x).norm() / b.norm(), 1e-15);
+    EXPECT_GT(report.residual, 1e-6);  // far from converged: the limit, not the residual, stopped it
+  }
+  EXPECT_EQ(SolveOptions{}.change_measure, ChangeMeasure::Total);  // the paper's measure by default
+  EXPECT_EQ(parse_change_measure("mean"), ChangeMeasure::Mean);
+  EXPECT_EQ(parse_change_measure(change_measure_name(ChangeMeasure::Total)), ChangeMeasure::Total);
+  EXPECT_THROW(parse_change_measure("max"), InvalidInput);
 }
 
 TEST(LinearSolver, GaussSeidelChangeShrinksWithSweeps) {
