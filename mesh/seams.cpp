@@ -567,21 +567,67 @@ SeamResult split_seams(const SliceMesh& slice, const TetMesh4& mesh, const Eigen
             crossings[e] = find_crossings(vertex_labels[std::size_t(edges[e].first)],
                                           vertex_labels[std::size_t(edges[e].second)], locator, atlas, options);
         });
-    std::vector<int> first_vertex(edges.size(), -1);
+    // Crossing vertices of every edge (ordered from its lower vertex id, with their parameters from it), keyed
+    // by (lower id, higher id). Edges made by splitting join as they appear.
+    struct EdgeSplit {
+      std::vector<int> vertices;
+      std::vector<double> s;
+    };
+    std::map<std::pair<int, int>, EdgeSplit> edge_splits;
+    auto add_vertex = [&](int lo, int hi, double s) {
+      positions.push_back((1.0 - s) * positions[std::size_t(lo)] + s * positions[std::size_t(hi)]);
+      vertex_labels.push_back((1.0 - s) * vertex_labels[std::size_t(lo)] + s * vertex_labels[std::size_t(hi)]);
+      return int(positions.size()) - 1;
+    };
     for (std::size_t e = 0; e < edges.size(); ++e) {
       result.texture_crossings += std::int64_t(crossings[e].s.size());
       result.unresolved_edges += crossings[e].unresolved;
-      first_vertex[e] = int(positions.size());
-      const int lo = edges[e].first, hi = edges[e].second;
+      EdgeSplit& split = edge_splits[edges[e]];
       for (const double s : crossings[e].s) {
-        positions.push_back((1.0 - s) * positions[std::size_t(lo)] + s * positions[std::size_t(hi)]);
-        vertex_labels.push_back((1.0 - s) * vertex_labels[std::size_t(lo)] + s * vertex_labels[std::size_t(hi)]);
+        split.vertices.push_back(add_vertex(edges[e].first, edges[e].second, s));
+        split.s.push_back(s);
       }
     }
+    // A cut, or a piece of an edge between consecutive crossings, crosses nothing by construction: testing it
+    // again would only find its own end points' seams.
+    auto mark_clean = [&](int a, int b) {
+      edge_splits.emplace(std::make_pair(std::min(a, b), std::max(a, b)), EdgeSplit{});
+    };
+    // Edges inside an input triangle (fan spokes and diagonals) are tested when first used: the label map is
+    // affine over the triangle but the seams and closest-point jumps it pulls back from A are curves, which
+    // can cross a spoke although they enter and leave through the crossings the spoke's fan was built from.
+    auto split_of = [&](int a, int b) -> const EdgeSplit& {
+      const std::pair<int, int> key(std::min(a, b), std::max(a, b));
+      const auto it = edge_splits.find(key);
+      if (it != edge_splits.end()) return it->second;
+      const EdgeCrossings c = find_crossings(vertex_labels[std::size_t(key.first)],
+                                             vertex_labels[std::size_t(key.second)], locator, atlas, options);
+      result.unresolved_edges += c.unresolved;
+      EdgeSplit split;
+      for (const double s : c.s) {
+        // An end point on a seam (a crossing vertex) shows its own seam within rounding of the bisection.
+        if (s < options.corner_margin || s > 1.0 - options.corner_margin) continue;
+        ++result.texture_crossings;
+        split.vertices.push_back(add_vertex(key.first, key.second, s));
+        split.s.push_back(s);
+      }
+      return edge_splits.emplace(key, std::move(split)).first->second;
+    };
 
     std::vector<std::array<int, 2>> texture_edges;
-    for (std::size_t f = 0; f < mid.faces.size(); ++f) {
-      const auto& c = mid.faces[f];
+    // Splits triangle c (depth 0: an input triangle, deeper: one of its pieces) at the crossings of its edges,
+    // and each piece again until its edges cross nothing.
+    std::function<void(const std::array<int, 3>&, int, int)> split_piece = [&](const std::array<int, 3>& c, int source,
+                                                                               int depth) {
+      // The last level's edges are its parent's cuts, pieces of its parent's edges or edges shared only with
+      // its siblings, so keeping it untested leaves no crossing vertex unused on a neighbour's edge.
+      if (depth >= options.max_split_depth) {
+        if (c[0] != c[1] && c[1] != c[2] && c[2] != c[0]) {
+          faces.push_back(c);
+          source_face.push_back(source);
+        }
+        return;
+      }
       // Boundary of the triangle with the crossings in order, and the triangle-barycentric of every point.
       std::vector<int> ring;
       std::vector<Eigen::Vector3d> ring_b;
@@ -591,54 +637,66 @@ SeamResult split_seams(const SliceMesh& slice, const TetMesh4& mesh, const Eigen
         const int a = c[std::size_t(k)], b = c[std::size_t((k + 1) % 3)];
         ring.push_back(a);
         ring_b.push_back(Eigen::Vector3d::Unit(k));
-        const int e = edge_index.at(std::minmax(a, b));
-        const auto& s_list = crossings[std::size_t(e)].s;
-        const int n = int(s_list.size());
+        const EdgeSplit& split = split_of(a, b);
+        const int n = int(split.s.size());
         for (int i = 0; i < n; ++i) {
           const int idx = a < b ? i : n - 1 - i;  // walk from a to b
-          const double s = a < b ? s_list[std::size_t(idx)] : 1.0 - s_list[std::size_t(idx)];
+          const double s = a < b ? split.s[std::size_t(idx)] : 1.0 - split.s[std::size_t(idx)];
           crossing_at.push_back(int(ring.size()));
           crossing_edge.push_back(k);
-          ring.push_back(first_vertex[std::size_t(e)] + idx);
+          ring.push_back(split.vertices[std::size_t(idx)]);
           ring_b.push_back((1.0 - s) * Eigen::Vector3d::Unit(k) + s * Eigen::Vector3d::Unit((k + 1) % 3));
         }
       }
-      auto emit = [&](int a, int b, int d) {
-        if (a == b || b == d || d == a) return;
-        faces.push_back({a, b, d});
-        source_face.push_back(mid.source_face[f]);
-      };
       const std::size_t m = ring.size();
       if (crossing_at.empty()) {
-        emit(c[0], c[1], c[2]);
-        continue;
+        if (c[0] != c[1] && c[1] != c[2] && c[2] != c[0]) {
+          faces.push_back(c);
+          source_face.push_back(source);
+        }
+        return;
       }
-      ++result.texture_split;
+      if (depth == 0) ++result.texture_split;
+      for (std::size_t i = 0; i < m; ++i) mark_clean(ring[i], ring[(i + 1) % m]);
+      auto piece = [&](int a, int b, int d) { split_piece({a, b, d}, source, depth + 1); };
       if (crossing_at.size() == 2 && crossing_edge[0] != crossing_edge[1]) {
         // One seam through the triangle: cut along the chord between the two crossings, fan each side.
         const int x = crossing_at[0], y = crossing_at[1];
+        mark_clean(ring[std::size_t(x)], ring[std::size_t(y)]);
         for (const auto& [from, to] : {std::pair<int, int>{x, y}, std::pair<int, int>{y, x + int(m)}})
           for (int i = from + 1; i < to; ++i)
-            emit(ring[std::size_t(from) % m], ring[std::size_t(i) % m], ring[std::size_t(i + 1) % m]);
+            piece(ring[std::size_t(from) % m], ring[std::size_t(i) % m], ring[std::size_t(i + 1) % m]);
         texture_edges.push_back({ring[std::size_t(x)], ring[std::size_t(y)]});
-        continue;
+        return;
+      }
+      if (depth > 0 && crossing_at.size() == 1) {
+        // A piece's corners are mostly crossings, on a seam: one entering through an edge of the piece leaves
+        // through the opposite corner (the piece's other edges cross nothing), so the cut ends there.
+        const int x = crossing_at[0], k = crossing_edge[0];
+        const int p = ring[std::size_t(x)], opposite = c[std::size_t((k + 2) % 3)];
+        mark_clean(p, opposite);
+        piece(c[std::size_t(k)], p, opposite);
+        piece(p, c[std::size_t((k + 1) % 3)], opposite);
+        texture_edges.push_back({p, opposite});
+        return;
       }
       // Seam ends, junctions or a seam leaving through the edge it entered: fan from a point inside.
-      ++result.texture_fan_splits;
+      if (depth == 0) ++result.texture_fan_splits;
       Eigen::Vector3d b = Eigen::Vector3d::Zero();
       for (const int i : crossing_at) b += ring_b[std::size_t(i)];
       b = 0.5 * b / double(crossing_at.size()) + Eigen::Vector3d::Constant(0.5 / 3.0);  // strictly inside
-      const int center = int(positions.size());
       Eigen::Vector3d x = Eigen::Vector3d::Zero(), l = Eigen::Vector3d::Zero();
       for (int k = 0; k < 3; ++k) {
         x += b(k) * positions[std::size_t(c[std::size_t(k)])];
         l += b(k) * vertex_labels[std::size_t(c[std::size_t(k)])];
       }
+      const int center = int(positions.size());
       positions.push_back(x);
       vertex_labels.push_back(l);
-      for (std::size_t i = 0; i < m; ++i) emit(center, ring[i], ring[(i + 1) % m]);
       for (const int i : crossing_at) texture_edges.push_back({center, ring[std::size_t(i)]});
-    }
+      for (std::size_t i = 0; i < m; ++i) piece(center, ring[i], ring[(i + 1) % m]);
+    };
+    for (std::size_t f = 0; f < mid.faces.size(); ++f) split_piece(mid.faces[f], mid.source_face[f], 0);
     result.texture_seam_curves = count_curves(texture_edges);
   } else {
     faces = mid.faces;

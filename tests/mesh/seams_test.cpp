@@ -140,6 +140,69 @@ TEST(Seams, LongitudeTextureSeamIsSplit) {
   EXPECT_GT(high, 0.99);
 }
 
+// Output triangles the longitude seam (half-plane y = 0, x > 0) passes through from edge to edge: corners on both
+// sides of y = 0 and the triangle's whole section with y = 0 at x > 0 (a section reaching x <= 0 holds the seam's
+// end, the z axis, where no cut can separate the sides).
+int crossed_by_longitude_seam(const SeamResult& r, double eps) {
+  int crossed = 0;
+  for (Eigen::Index f = 0; f < r.F.rows(); ++f) {
+    std::array<Eigen::Vector3d, 3> l;
+    for (int k = 0; k < 3; ++k) l[std::size_t(k)] = r.labels.row(r.F(f, k)).transpose();
+    double low = 0.0, high = 0.0, x_min = 1e9;
+    for (int k = 0; k < 3; ++k) {
+      const Eigen::Vector3d& a = l[std::size_t(k)];
+      const Eigen::Vector3d& b = l[std::size_t((k + 1) % 3)];
+      low = std::min(low, a.y());
+      high = std::max(high, a.y());
+      if ((a.y() < 0.0) != (b.y() < 0.0)) x_min = std::min(x_min, a.x() + (b.x() - a.x()) * a.y() / (a.y() - b.y()));
+    }
+    crossed += low < -eps && high > eps && x_min > 0.0;
+  }
+  return crossed;
+}
+
+TEST(Seams, FanPiecesAreSplitWhereTheSeamCrossesTheirSpokes) {
+  // One triangle of B whose labels (near A's north pole) surround the end of the longitude seam: it enters
+  // through one edge and ends inside, so the triangle is fanned from a point inside. The corners sit so that
+  // the seam, on its way to its end, passes through two fan triangles, across the spokes between them.
+  TetMesh4 mesh;
+  mesh.V.resize(4, 4);
+  mesh.V << 0, 0, 0, 1,  //
+      1, 0, 0, 1,        //
+      0, 1, 0, 1,        //
+      0.3, 0.3, 0.5, 0;
+  mesh.T.resize(1, 4);
+  mesh.T << 0, 1, 2, 3;
+  mesh.side = {VertexSide::B, VertexSide::B, VertexSide::B, VertexSide::A};
+  mesh.time_steps = 1;
+  mesh.voxel_size = 1.0;
+  Eigen::MatrixXd labels(4, 3);
+  labels.row(0) = Eigen::Vector3d(0.3, 0.075, 0.9).normalized().transpose();
+  labels.row(1) = Eigen::Vector3d(-0.15, 0.15, 0.9).normalized().transpose();
+  labels.row(2) = Eigen::Vector3d(-0.15, -0.3, 0.9).normalized().transpose();
+  labels.row(3) = Eigen::Vector3d(0.0, -0.025, 0.9).normalized().transpose();
+  ShapeSpec spec;
+  spec.kind = "sphere";
+  spec.resolution = 128;  // faces small next to the triangle, so closest points follow the seam closely
+  const Surface A = make_shape(spec, std::nullopt);
+  const SurfaceLocator locator(A);
+  const SliceMesh B = target_boundary(mesh, labels);
+  ASSERT_EQ(B.F.rows(), 1);
+  SeamOptions options;
+  const SeamResult r = split_seams(B, mesh, labels, A, locator, options);
+  EXPECT_EQ(r.seam_tets, 0);
+  EXPECT_EQ(r.texture_split, 1);
+  EXPECT_EQ(r.texture_fan_splits, 1);
+  EXPECT_EQ(r.unresolved_edges, 0);
+  EXPECT_EQ(crossed_by_longitude_seam(r, 0.01), 0);
+  // Splitting only at the crossings of B's own edges leaves fan triangles across the seam.
+  options.max_split_depth = 1;
+  const SeamResult once = split_seams(B, mesh, labels, A, locator, options);
+  EXPECT_EQ(once.texture_fan_splits, 1);
+  EXPECT_GT(crossed_by_longitude_seam(once, 0.01), 0);
+  EXPECT_LT(once.F.rows(), r.F.rows());
+}
+
 TEST(Seams, CountCurves) {
   EXPECT_EQ(count_curves({}), 0);
   EXPECT_EQ(count_curves({{0, 1}, {1, 2}, {5, 6}}), 2);
