@@ -409,6 +409,7 @@ PipelineResult run_pipeline(const PipelineOptions& options) {
     traced_total.tet_pieces += traced.tet_pieces;
     traced_total.face_pieces += traced.face_pieces;
     traced_total.edge_pieces += traced.edge_pieces;
+    traced_total.rate_evaluations += traced.rate_evaluations;
     traced_total.max_pieces = std::max(traced_total.max_pieces, traced.max_pieces);
     traced_total.seconds += traced.seconds;
   };
@@ -634,6 +635,7 @@ PipelineResult run_pipeline(const PipelineOptions& options) {
                      {"face_pieces", traced_total.face_pieces},
                      {"edge_pieces", traced_total.edge_pieces},
                      {"max_pieces", traced_total.max_pieces},
+                     {"rate_evaluations", traced_total.rate_evaluations},
                      {"seconds", traced_total.seconds},
                      {"fallback", "a stalled trace takes the upwind label interpolated where it stopped"}};
   {

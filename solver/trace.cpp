@@ -154,6 +154,7 @@ Eigen::MatrixXd vertex_normals(const TetMesh4& mesh, const VertexTets& adj) {
 
 struct Stats {
   std::int64_t pieces[5] = {0, 0, 0, 0, 0};  // by simplex size
+  std::int64_t evaluations = 0;              // of the weight rates, in integrate() and choose()
   std::int64_t total() const { return pieces[2] + pieces[3] + pieces[4]; }
 };
 
@@ -209,8 +210,8 @@ class Tracer {
       last = key;
       Simplex piece;
       Weights pw;
-      if (!choose(ids, w, n, piece, pw)) return TraceStatus::Stalled;
-      if (!integrate(piece, pw)) return TraceStatus::Stalled;
+      if (!choose(ids, w, n, piece, pw, stats)) return TraceStatus::Stalled;
+      if (!integrate(piece, pw, stats)) return TraceStatus::Stalled;
       ++stats.pieces[piece.size];
       n = 0;
       for (int j = 0; j < piece.size; ++j)
@@ -256,7 +257,7 @@ class Tracer {
 
   // Follows the weight ODE in x from pw until the first weight that was positive (or leaves zero) reaches zero.
   // pw is #x.size weights (zero beyond). False when the flow stops inside x.
-  bool integrate(const Simplex& x, Weights& pw) const {
+  bool integrate(const Simplex& x, Weights& pw, Stats& stats) const {
     const int m = x.size;
     // Weights that start at zero enter (choose() demands a positive rate), so they are not taken as leaving
     // while they are still zero; a step too long for one of them to become positive is halved.
@@ -264,6 +265,7 @@ class Tracer {
     for (int j = 0; j < m; ++j) pinned[std::size_t(j)] = pw(j) <= options_.weight_epsilon;
     for (int sub = 0; sub < 64; ++sub) {
       const Weights r = rates(x, pw);
+      stats.evaluations += 5;  // and the step's RK4
       double exit_time = std::numeric_limits<double>::infinity();
       for (int j = 0; j < m; ++j)
         if (!pinned[std::size_t(j)] && r(j) < 0.0) exit_time = std::min(exit_time, pw(j) / -r(j));
@@ -277,10 +279,12 @@ class Tracer {
         if (!pinned_negative) break;
         h *= 0.5;
         next = rk4(x, pw, h);
+        stats.evaluations += 4;
       }
       pinned.fill(false);
       // The first weight to cross zero within the step: its linear in-step estimate, refined by regula falsi
-      // on the RK4 solution.
+      // on the RK4 solution. (The Illinois variant took as many evaluations on cow -> horse: the weight curves are
+      // nearly linear within a step.)
       double theta = 2.0;
       int leaving = -1;
       for (int j = 0; j < m; ++j)
@@ -300,6 +304,7 @@ class Tracer {
       Weights at = next;
       for (int iteration = 0; iteration < 8; ++iteration) {
         at = rk4(x, pw, theta * h);
+        stats.evaluations += 4;
         const double value = at(leaving);
         if (std::abs(value) <= 1e-13) break;
         if (value > 0.0) {
@@ -326,8 +331,8 @@ class Tracer {
   // decreases. Tets move the flow along the vertex normal, so in a star that does not fold over its normal
   // exactly one tet is feasible for a generic direction; otherwise the one whose velocity is best aligned with
   // the flow wins, ties to the larger simplex, then to the first found (lowest tet index).
-  bool choose(const std::array<int, 4>& ids, const std::array<double, 4>& w, int n, Simplex& best,
-              Weights& best_w) const {
+  bool choose(const std::array<int, 4>& ids, const std::array<double, 4>& w, int n, Simplex& best, Weights& best_w,
+              Stats& stats) const {
     Eigen::Vector4d d = Eigen::Vector4d::Zero();
     for (int k = 0; k < n; ++k) d -= w[std::size_t(k)] * field_.row(ids[std::size_t(k)]).transpose();
     bool found = false;
@@ -376,6 +381,7 @@ class Tracer {
           Weights xw = Weights::Zero();
           for (int k = 0; k < n; ++k) xw(k) = w[std::size_t(k)];
           const Weights r = rates(x, xw);
+          ++stats.evaluations;
           const double largest = r.head(size).cwiseAbs().maxCoeff();
           bool feasible = largest > 0.0, moves = false;
           for (int k = 0; k < size && feasible; ++k) {
@@ -504,6 +510,7 @@ TraceResult CharacteristicTracer::trace(const std::vector<MeshPoint>& starts) co
     result.edge_pieces += stats[i].pieces[2];
     result.face_pieces += stats[i].pieces[3];
     result.tet_pieces += stats[i].pieces[4];
+    result.rate_evaluations += stats[i].evaluations;
     result.max_pieces = std::max(result.max_pieces, stats[i].total());
   }
   result.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - start_time).count();

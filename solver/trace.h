@@ -60,10 +60,11 @@ struct TraceResult {
   std::vector<MeshPoint> end_point;  ///< #starts: the mesh point where it ended (for fallbacks of stalled traces)
   std::vector<TraceStatus> status;   ///< #starts
   std::int64_t reached = 0, stalled = 0, invalid = 0;
-  std::int64_t tet_pieces = 0;   ///< straight pieces through a tet's interior
-  std::int64_t face_pieces = 0;  ///< pieces that slide along a face (T of both tets points into it)
-  std::int64_t edge_pieces = 0;  ///< pieces along an edge
-  std::int64_t max_pieces = 0;   ///< the longest characteristic, in pieces
+  std::int64_t tet_pieces = 0;        ///< straight pieces through a tet's interior
+  std::int64_t face_pieces = 0;       ///< pieces that slide along a face (T of both tets points into it)
+  std::int64_t edge_pieces = 0;       ///< pieces along an edge
+  std::int64_t max_pieces = 0;        ///< the longest characteristic, in pieces
+  std::int64_t rate_evaluations = 0;  ///< evaluations of the weight ODE's right-hand side: the tracer's work
   double seconds = 0.0;
 };
 

@@ -92,6 +92,8 @@ TEST(TraceTest, ConcentricSpheresTraceRadiallyLikeTheUpwindSweep) {
   const TraceResult r = trace_to_source(mesh, s, field, b_vertices(mesh, ids));
   EXPECT_EQ(r.reached, std::int64_t(ids.size()));
   EXPECT_GT(r.tet_pieces, std::int64_t(ids.size()));
+  // Every piece costs one RK4 step (4 evaluations) and its rate (1) at least, plus choose()'s candidates.
+  EXPECT_GE(r.rate_evaluations, 5 * (r.tet_pieces + r.face_pieces + r.edge_pieces) + r.tet_pieces);
   const double traced = worst_radial(sphere, ids, r.end);
 
   const TransportResult upwind = transport_labels(mesh, s, field, [](const Eigen::Vector3d& x) { return x; });
@@ -118,6 +120,7 @@ TEST(TraceTest, ResultDoesNotDependOnThreadCount) {
   EXPECT_EQ((one.end - many.end).cwiseAbs().maxCoeff(), 0.0);
   EXPECT_EQ(one.tet_pieces, many.tet_pieces);
   EXPECT_EQ(one.face_pieces, many.face_pieces);
+  EXPECT_EQ(one.rate_evaluations, many.rate_evaluations);
 }
 
 TEST(TraceTest, StallsWhereTheFieldVanishesAndRejectsBadStarts) {
