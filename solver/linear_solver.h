@@ -21,8 +21,10 @@ enum class ChangeMeasure {
 };
 
 struct SolveOptions {
-  double tolerance = 1e-10;        ///< cg, cg-ic: stop at relative residual |b - Ax| / |b| below this; auto
-                                   ///< estimates each candidate's time to reach it
+  double tolerance = 1e-8;         ///< cg, cg-ic, cg-amg: stop at relative residual |b - Ax| / |b| below this;
+                                   ///< auto estimates each candidate's time to reach it. 1e-8 against 1e-10 on
+                                   ///< sphere -> bunny (0.4M tets): 60 instead of 77 cg-amg iterations, labels
+                                   ///< moved by at most 1e-4 (median 8e-8) of the bounding-box diagonal
   int max_iterations = 20000;      ///< cg, cg-ic give up (SolverError) after this many iterations; gauss-seidel
                                    ///< stops (without error) after this many sweeps
   double amg_strength = 0.08;      ///< cg-amg: j joins i's aggregate only if |a_ij| >= amg_strength sqrt(a_ii a_jj)
