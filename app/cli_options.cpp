@@ -48,6 +48,9 @@ void add_pipeline_options(CLI::App& cmd, PipelineOptions& o) {
       ->check(CLI::IsMember({"total", "mean"}))
       ->default_str(change_measure_name(o.laplace.solve.change_measure));
   cmd.add_option("--slices", o.slices, "Morph times in (0,1) at which to write slice_<t>.obj")->delimiter(',');
+  cmd.add_option("--texture", o.texture,
+                 "Image for the source's texture coordinates, in place of its MTL's (e.g. spot.obj with "
+                 "spot_texture.png)");
   cmd.add_option("--align", o.align,
                  "none: meshes in their own coordinates; bbox: both normalised, outputs in the target's")
       ->check(CLI::IsMember({"none", "bbox"}))

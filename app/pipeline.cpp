@@ -83,6 +83,14 @@ void load_inputs(const PipelineOptions& options, Surface& A, Surface& B) {
   if (a_builtin) A = make_shape(*a_spec, std::optional(bounding_box(B.V)));
   validate_surface(A, true);
   validate_surface(B, true);
+  if (!options.texture.empty()) {
+    if (!A.has_uv())
+      throw InvalidInput(options.texture + ": --texture needs texture coordinates on the source, which " +
+                         options.source + " does not have");
+    // Read now, so that an unreadable image is reported before any work; the outputs re-encode it as PNG.
+    A.texture = std::make_shared<const RgbImage>(read_image(options.texture));
+    A.texture_path = options.texture;
+  }
 }
 
 void write_labels(const std::string& path, const Eigen::MatrixXd& labels) {

@@ -25,6 +25,9 @@ struct PipelineOptions {
   /// its vertices get labels and UVs (each through its closest point on the extracted B) and target.obj keeps its
   /// connectivity. Empty: the extracted B (the t = 1 boundary of the 4D mesh) is the output.
   std::string target_mesh;
+  /// Optional image for the source's texture coordinates, in place of the one its MTL names (an OBJ without an MTL,
+  /// such as spot.obj beside spot_texture.png, has none). The source must have texture coordinates.
+  std::string texture;
   std::string align = "none";  ///< "none": meshes in their own coordinates; "bbox": both normalised to a unit box
   MorphOptions morph;          ///< lattice resolution
   ExtractOptions extract;      ///< time steps, time scale

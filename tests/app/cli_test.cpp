@@ -16,6 +16,8 @@
 #include <string>
 #include <vector>
 
+#include "io/image.h"
+
 namespace fs = std::filesystem;
 
 namespace {
@@ -188,6 +190,33 @@ TEST_F(Cli, ChangeThresholdStopsGaussSeidel) {
   }
   EXPECT_LT(solver[1e-3]["iterations"].get<int>(), solver[1e-5]["iterations"].get<int>());
   expect_rejected("sphere torus --change-threshold -1", "change-threshold");
+}
+
+TEST_F(Cli, TextureOptionGivesTheSourceAnImage) {
+  // A 2 x 1 PNG (red, blue): the output's texture must be exactly this image, not the built-in sphere's.
+  const fs::path png = dir_ / "tex.png";
+  {
+    const unsigned char pixels[] = {255, 0, 0, 0, 0, 255};
+    morphmap::RgbImage image;
+    image.width = 2;
+    image.height = 1;
+    image.pixels.assign(pixels, pixels + 6);
+    morphmap::write_png(png.string(), image);
+  }
+  const fs::path out = dir_ / "textured";
+  const CommandRun r =
+      run_command("map sphere torus --texture " + png.string() + " -o " + out.string() + " --voxels 12 --time-steps 4");
+  ASSERT_EQ(r.status, 0) << r.output;
+  const morphmap::RgbImage back = morphmap::read_image((out / "texture.png").string());
+  EXPECT_EQ(back.width, 2);
+  EXPECT_EQ(back.height, 1);
+  EXPECT_EQ(back.pixels, (std::vector<unsigned char>{255, 0, 0, 0, 0, 255}));
+  std::ifstream mtl(out / "target.mtl");
+  const std::string text((std::istreambuf_iterator<char>(mtl)), std::istreambuf_iterator<char>());
+  EXPECT_NE(text.find("map_Kd texture.png"), std::string::npos) << text;
+  expect_rejected("sphere torus --texture " + (dir_ / "missing.png").string(), "missing.png");
+  expect_rejected("sphere torus --texture " + write("bad.png", "not an image"), "bad.png");
+  expect_rejected(write("tet.off", kTetraOff) + " sphere --texture " + png.string(), "texture coordinates");
 }
 
 TEST_F(Cli, HelpOnEveryCommand) {
