@@ -385,24 +385,47 @@ class Atlas {
   }
 
   // From face f, walk across non-seam edges towards p (the edge opposite the most negative barycentric of
-  // p's projection) until p projects inside the face: the face of f's chart that holds p's closest point.
+  // p's projection) until p projects inside the face, then descend to the neighbour whose closest point to p is
+  // nearer while there is one: the face of f's chart that holds p's closest point. The projection walk alone
+  // stops between two faces that each project p outside towards the other (a concave fold, where labels lie
+  // off A, as in spot's head), short of the closest point: the UVs there under-estimated a triangle's image.
   int walk(int f, const Eigen::Vector3d& p) const {
     int previous = -1;
     for (int step = 0; step < 64; ++step) {
       const Eigen::Vector3d a = corner(f, 0), e1 = corner(f, 1) - a, e2 = corner(f, 2) - a, d = p - a;
       const double g11 = e1.squaredNorm(), g12 = e1.dot(e2), g22 = e2.squaredNorm();
       const double det = g11 * g22 - g12 * g12;
-      if (!(det > 0.0)) return f;
+      if (!(det > 0.0)) break;
       const double u = (g22 * e1.dot(d) - g12 * e2.dot(d)) / det, v = (g11 * e2.dot(d) - g12 * e1.dot(d)) / det;
       const Eigen::Vector3d w(1.0 - u - v, u, v);
       Eigen::Index k = 0;
-      if (w.minCoeff(&k) >= 0.0) return f;
+      if (w.minCoeff(&k) >= 0.0) break;
       const int g = neighbour_[std::size_t(3 * f + k)];
-      if (g < 0 || g == previous) return f;
+      if (g < 0 || g == previous) break;
       previous = f;
       f = g;
     }
+    double best = squared_distance(f, p);
+    for (int step = 0; step < 64; ++step) {
+      int next = -1;
+      for (int k = 0; k < 3; ++k) {
+        const int g = neighbour_[std::size_t(3 * f + k)];
+        if (g < 0) continue;
+        const double d = squared_distance(g, p);
+        if (d < best * (1.0 - 1e-12)) {
+          best = d;
+          next = g;
+        }
+      }
+      if (next < 0) break;
+      f = next;
+    }
     return f;
+  }
+
+  double squared_distance(int f, const Eigen::Vector3d& p) const {
+    const Eigen::Vector3d w = closest_barycentric(p, corner(f, 0), corner(f, 1), corner(f, 2));
+    return (w(0) * corner(f, 0) + w(1) * corner(f, 1) + w(2) * corner(f, 2) - p).squaredNorm();
   }
 
   bool continuous(int fa, int fb) const {
