@@ -203,6 +203,59 @@ TEST(Seams, FanPiecesAreSplitWhereTheSeamCrossesTheirSpokes) {
   EXPECT_LT(once.F.rows(), r.F.rows());
 }
 
+TEST(Seams, CornerUvIsTakenAtTheClosestPointPastAConcaveFold) {
+  // A sheet folded into a valley (profile x = -2, -1, 0, 1, 2 with z = 0, 0, -1, 0, 0, extruded along y), one
+  // UV chart (u, v) = (x, y). Corner 0's label hangs above the valley's left rim: it projects inside the right
+  // slope, where the triangle's home face lies, but its closest point is the left rim, x = -1. A walk that
+  // stops at the first face p projects into gives u = 0.9 there.
+  Surface A;
+  const double xs[] = {-2, -1, 0, 1, 2}, zs[] = {0, 0, -1, 0, 0};
+  A.V.resize(10, 3);
+  for (int i = 0; i < 5; ++i) {
+    A.V.row(2 * i) << xs[i], -1, zs[i];
+    A.V.row(2 * i + 1) << xs[i], 1, zs[i];
+  }
+  A.F.resize(8, 3);
+  for (int i = 0; i < 4; ++i) {
+    A.F.row(2 * i) << 2 * i, 2 * i + 2, 2 * i + 3;
+    A.F.row(2 * i + 1) << 2 * i, 2 * i + 3, 2 * i + 1;
+  }
+  A.UV = A.V.leftCols(2);
+  A.FUV = A.F;
+  const SurfaceLocator locator(A);
+  TetMesh4 mesh;
+  mesh.V.resize(4, 4);
+  mesh.V << 0, 0, 0, 1,  //
+      1, 0, 0, 1,        //
+      0, 1, 0, 1,        //
+      0.3, 0.3, 0.5, 0;
+  mesh.T.resize(1, 4);
+  mesh.T << 0, 1, 2, 3;
+  mesh.side = {VertexSide::B, VertexSide::B, VertexSide::B, VertexSide::A};
+  mesh.time_steps = 1;
+  mesh.voxel_size = 1.0;
+  Eigen::MatrixXd labels(4, 3);
+  labels << -0.2, 0, 1,  //
+      0.8, 0.1, -0.2,    //
+      0.8, -0.1, -0.2,   //
+      0, 0, -1;
+  const SliceMesh B = target_boundary(mesh, labels);
+  ASSERT_EQ(B.F.rows(), 1);
+  SeamOptions options;
+  options.texture = false;
+  options.topological = false;
+  const SeamResult r = split_seams(B, mesh, labels, A, locator, options);
+  ASSERT_EQ(r.F.rows(), 1);
+  ASSERT_EQ(r.FUV.rows(), 1);
+  for (int k = 0; k < 3; ++k) {
+    const Eigen::Vector3d label = r.labels.row(r.F(0, k)).transpose();
+    const Eigen::Vector3d closest = locator.closest(label).point;  // one chart: its UV is (x, y)
+    EXPECT_NEAR(r.UV(r.FUV(0, k), 0), closest.x(), 1e-9) << "corner " << k;
+    EXPECT_NEAR(r.UV(r.FUV(0, k), 1), closest.y(), 1e-9) << "corner " << k;
+  }
+  EXPECT_NEAR(r.UV(r.FUV(0, 0), 0), -1.0, 1e-9);
+}
+
 TEST(Seams, CountCurves) {
   EXPECT_EQ(count_curves({}), 0);
   EXPECT_EQ(count_curves({{0, 1}, {1, 2}, {5, 6}}), 2);
