@@ -14,7 +14,7 @@ install_packages() {
     libcgal-dev libgmp-dev libmpfr-dev \
     libgtest-dev libgmock-dev libbenchmark-dev \
     libcli11-dev nlohmann-json3-dev libstb-dev libtinyobjloader-dev libembree-dev \
-    jq
+    jq python3
 }
 
 # A simulated install lists what is missing ("Inst" lines); it fails on a fresh machine without package lists.

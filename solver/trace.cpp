@@ -265,7 +265,7 @@ class Tracer {
     for (int j = 0; j < m; ++j) pinned[std::size_t(j)] = pw(j) <= options_.weight_epsilon;
     for (int sub = 0; sub < 64; ++sub) {
       const Weights r = rates(x, pw);
-      stats.evaluations += 5;  // and the step's RK4
+      ++stats.evaluations;
       double exit_time = std::numeric_limits<double>::infinity();
       for (int j = 0; j < m; ++j)
         if (!pinned[std::size_t(j)] && r(j) < 0.0) exit_time = std::min(exit_time, pw(j) / -r(j));
@@ -273,6 +273,7 @@ class Tracer {
       if (x.variation > 0.0) h = std::min(h, options_.step_variation / x.variation);
       if (!std::isfinite(h) || !(h > 0.0)) return false;
       Weights next = rk4(x, pw, h);
+      stats.evaluations += 4;
       for (int halve = 0; halve < 30; ++halve) {
         bool pinned_negative = false;
         for (int j = 0; j < m; ++j) pinned_negative = pinned_negative || (pinned[std::size_t(j)] && next(j) < 0.0);

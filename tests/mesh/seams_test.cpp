@@ -21,9 +21,8 @@ Surface unit_sphere() {
   return make_shape(spec, std::nullopt);
 }
 
-// One tet: three vertices on B (t = 1), one inside. Vertex 0 carries the north pole's label, the others
-// the south pole's, so B's only triangle straddles a topological seam.
-TEST(Seams, TriangleAcrossALabelSeamIsCutAndNoPieceSpansIt) {
+// One tet: vertices 0-2 on B (t = 1), forming B's only triangle, vertex 3 on A.
+TetMesh4 one_tet() {
   TetMesh4 mesh;
   mesh.V.resize(4, 4);
   mesh.V << 0, 0, 0, 1,  //
@@ -35,6 +34,13 @@ TEST(Seams, TriangleAcrossALabelSeamIsCutAndNoPieceSpansIt) {
   mesh.side = {VertexSide::B, VertexSide::B, VertexSide::B, VertexSide::A};
   mesh.time_steps = 1;
   mesh.voxel_size = 1.0;
+  return mesh;
+}
+
+// One tet: three vertices on B (t = 1), one inside. Vertex 0 carries the north pole's label, the others
+// the south pole's, so B's only triangle straddles a topological seam.
+TEST(Seams, TriangleAcrossALabelSeamIsCutAndNoPieceSpansIt) {
+  const TetMesh4 mesh = one_tet();
   Eigen::MatrixXd labels(4, 3);
   labels << 0, 0, 1,  //
       0.05, 0, -1,    //
@@ -165,17 +171,7 @@ TEST(Seams, FanPiecesAreSplitWhereTheSeamCrossesTheirSpokes) {
   // One triangle of B whose labels (near A's north pole) surround the end of the longitude seam: it enters
   // through one edge and ends inside, so the triangle is fanned from a point inside. The corners sit so that
   // the seam, on its way to its end, passes through two fan triangles, across the spokes between them.
-  TetMesh4 mesh;
-  mesh.V.resize(4, 4);
-  mesh.V << 0, 0, 0, 1,  //
-      1, 0, 0, 1,        //
-      0, 1, 0, 1,        //
-      0.3, 0.3, 0.5, 0;
-  mesh.T.resize(1, 4);
-  mesh.T << 0, 1, 2, 3;
-  mesh.side = {VertexSide::B, VertexSide::B, VertexSide::B, VertexSide::A};
-  mesh.time_steps = 1;
-  mesh.voxel_size = 1.0;
+  const TetMesh4 mesh = one_tet();
   Eigen::MatrixXd labels(4, 3);
   labels.row(0) = Eigen::Vector3d(0.3, 0.075, 0.9).normalized().transpose();
   labels.row(1) = Eigen::Vector3d(-0.15, 0.15, 0.9).normalized().transpose();
@@ -223,17 +219,7 @@ TEST(Seams, CornerUvIsTakenAtTheClosestPointPastAConcaveFold) {
   A.UV = A.V.leftCols(2);
   A.FUV = A.F;
   const SurfaceLocator locator(A);
-  TetMesh4 mesh;
-  mesh.V.resize(4, 4);
-  mesh.V << 0, 0, 0, 1,  //
-      1, 0, 0, 1,        //
-      0, 1, 0, 1,        //
-      0.3, 0.3, 0.5, 0;
-  mesh.T.resize(1, 4);
-  mesh.T << 0, 1, 2, 3;
-  mesh.side = {VertexSide::B, VertexSide::B, VertexSide::B, VertexSide::A};
-  mesh.time_steps = 1;
-  mesh.voxel_size = 1.0;
+  const TetMesh4 mesh = one_tet();
   Eigen::MatrixXd labels(4, 3);
   labels << -0.2, 0, 1,  //
       0.8, 0.1, -0.2,    //
