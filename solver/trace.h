@@ -27,8 +27,10 @@ struct TraceOptions {
   /// (largest |rate| of the simplex); below that the flow runs along the face, and the face is followed instead.
   double rate_tolerance = 1e-9;
   /// Runge-Kutta steps are limited so that the field's variation over one step, relative to its size, stays
-  /// below this (the error of one RK4 step is about its fifth power / 120).
-  double step_variation = 0.25;
+  /// below this (the error of one RK4 step is about its fifth power / 120). Measured on sphere -> bunny: 1 moves
+  /// the labels from those at 0.25 by a median 4e-9 and a 99th percentile of 1e-5 (the box is 3.1) and changes no
+  /// stretch figure in its third digit, at 60% of the evaluations; 4 moves them by a median 0.06.
+  double step_variation = 1.0;
   /// Passes of neighbour averaging applied to the vertex field before tracing (each vertex: the mean of its own
   /// and its star's vertices' unit vectors, normalised). Averaged tet gradients are only first-order accurate,
   /// and their noise at the scale of a tet becomes noise of the traced map between neighbouring vertices.
