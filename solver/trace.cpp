@@ -14,6 +14,7 @@
 
 #include <Eigen/Dense>
 #include <algorithm>
+#include <atomic>
 #include <chrono>
 #include <limits>
 #include <string>
@@ -31,6 +32,7 @@ using Weights = Eigen::Vector4d;
 // the field and normals at its vertices.
 struct Simplex {
   int size = 0;                                                         ///< vertices: 2 edge, 3 face, 4 tet
+  int tet = -1;                                                         ///< the mesh tet (tets only)
   std::array<int, 4> ids{{-1, -1, -1, -1}};                             ///< mesh vertices
   Eigen::Matrix<double, 4, 3> G = Eigen::Matrix<double, 4, 3>::Zero();  ///< grad w_1 .. grad w_(size-1)
   Eigen::Matrix4d T = Eigen::Matrix4d::Zero();                          ///< columns: the field at the vertices
@@ -192,7 +194,10 @@ class Tracer {
         s_(s),
         options_(options),
         adj_(build_vertex_tets(mesh.T, mesh.vertex_count())),
-        normals_(vertex_normals(mesh, adj_)) {
+        normals_(vertex_normals(mesh, adj_)),
+        across_(new std::atomic<int>[std::size_t(mesh.tet_count()) * 4]) {
+    for (std::size_t i = 0; i < std::size_t(mesh.tet_count()) * 4; ++i)
+      across_[i].store(kUnknown, std::memory_order_relaxed);
     field_ = field;
     for (int pass = 0; pass < options.field_smoothing; ++pass) field_ = smooth_field(mesh, adj_, field_);
   }
@@ -215,6 +220,7 @@ class Tracer {
     // pieces ago (along an edge and back, where the field converges from both ends) is a stagnation point.
     std::array<int, 4> before_last{{-2, -2, -2, -2}}, last{{-2, -2, -2, -2}};
     double s_checkpoint = 0.0;
+    int from_tet = -1;  // the tet the last piece crossed, when it ended on one of its faces
     for (int step = 0;; ++step) {
       end = MeshPoint{};
       for (int k = 0; k < n; ++k) {
@@ -237,9 +243,10 @@ class Tracer {
       last = key;
       Simplex piece;
       Weights pw;
-      if (!choose(ids, w, n, piece, pw, stats)) return TraceStatus::Stalled;
+      if (!choose(ids, w, n, from_tet, piece, pw, stats)) return TraceStatus::Stalled;
       if (!integrate(piece, pw, stats)) return TraceStatus::Stalled;
       ++stats.pieces[piece.size];
+      from_tet = piece.tet;
       n = 0;
       for (int j = 0; j < piece.size; ++j)
         if (pw(j) > options_.weight_epsilon) {
@@ -365,8 +372,59 @@ class Tracer {
   // decreases. Tets move the flow along the vertex normal, so in a star that does not fold over its normal
   // exactly one tet is feasible for a generic direction; otherwise the one whose velocity is best aligned with
   // the flow wins, ties to the larger simplex, then to the first found (lowest tet index).
-  bool choose(const std::array<int, 4>& ids, const std::array<double, 4>& w, int n, Simplex& best, Weights& best_w,
-              Stats& stats) const {
+  // The tets holding the support, in increasing index. On a face of from_tet (the common case: a piece ended on
+  // a face of its tet) they are from_tet and its neighbour across that face, cached per (tet, face).
+  void support_tets(const std::array<int, 4>& ids, int n, int from_tet, std::vector<int>& out) const {
+    out.clear();
+    if (n == 3 && from_tet >= 0) {
+      int k = 0;
+      while (k < 4 && std::find(ids.begin(), ids.begin() + 3, mesh_.T(from_tet, k)) != ids.begin() + 3) ++k;
+      if (k < 4) {
+        std::atomic<int>& slot = across_[std::size_t(from_tet) * 4 + std::size_t(k)];
+        int other = slot.load(std::memory_order_relaxed);
+        if (other == kUnknown) {
+          // Any thread computes the same value: storing it twice is harmless.
+          star_intersection(ids, n, out);
+          other = out.size() == 1 ? kNone : out.size() == 2 ? (out[0] == from_tet ? out[1] : out[0]) : kMany;
+          slot.store(other, std::memory_order_relaxed);
+          return;
+        }
+        if (other != kMany) {
+          out.push_back(from_tet);
+          if (other >= 0) out.insert(other < from_tet ? out.begin() : out.end(), other);
+          return;
+        }
+      }
+    }
+    star_intersection(ids, n, out);
+  }
+
+  // The intersection of the support vertices' stars, which are sorted by tet index, walked in step (reading the
+  // star lists only: testing each tet of one star against the others' vertices read a random row of T per tet).
+  void star_intersection(const std::array<int, 4>& ids, int n, std::vector<int>& out) const {
+    out.clear();
+    std::array<std::int64_t, 4> at{}, end{};
+    int scan = 0;  // the support vertex with the fewest tets
+    for (int k = 0; k < n; ++k) {
+      at[std::size_t(k)] = adj_.first(ids[std::size_t(k)]);
+      end[std::size_t(k)] = adj_.last(ids[std::size_t(k)]);
+      if (end[std::size_t(k)] - at[std::size_t(k)] < end[std::size_t(scan)] - at[std::size_t(scan)]) scan = k;
+    }
+    for (std::int64_t j = at[std::size_t(scan)]; j < end[std::size_t(scan)]; ++j) {
+      const int t = adj_.tet(j);
+      bool all = true;
+      for (int k = 0; k < n && all; ++k) {
+        if (k == scan) continue;
+        std::int64_t& i = at[std::size_t(k)];
+        while (i < end[std::size_t(k)] && adj_.tet(i) < t) ++i;
+        all = i < end[std::size_t(k)] && adj_.tet(i) == t;
+      }
+      if (all) out.push_back(t);
+    }
+  }
+
+  bool choose(const std::array<int, 4>& ids, const std::array<double, 4>& w, int n, int from_tet, Simplex& best,
+              Weights& best_w, Stats& stats) const {
     Eigen::Vector4d d = Eigen::Vector4d::Zero();
     for (int k = 0; k < n; ++k) d -= w[std::size_t(k)] * field_.row(ids[std::size_t(k)]).transpose();
     bool found = false;
@@ -374,19 +432,13 @@ class Tracer {
     std::vector<std::array<int, 4>> seen;
     const double d2 = d.squaredNorm();
     if (!(d2 > 0.0)) return false;
-    int scan = ids[0];  // the support vertex with the fewest tets: every candidate holds it
-    for (int k = 1; k < n; ++k)
-      if (adj_.last(ids[std::size_t(k)]) - adj_.first(ids[std::size_t(k)]) < adj_.last(scan) - adj_.first(scan))
-        scan = ids[std::size_t(k)];
+    thread_local std::vector<int> candidates;
+    support_tets(ids, n, from_tet, candidates);
     // Tets first; faces and edges together: their spans do not nest like a tet's and its faces', and the flow along
     // an edge projects onto a skew face as a feasible but sideways direction.
     for (int size = 4; size >= std::max(2, n) && !(found && size == 3); --size) {
       seen.clear();
-      for (std::int64_t j = adj_.first(scan); j < adj_.last(scan); ++j) {
-        const int t = adj_.tet(j);
-        bool all = true;
-        for (int k = 0; k < n && all; ++k) all = ids[std::size_t(k)] == scan || contains(t, ids[std::size_t(k)]);
-        if (!all) continue;
+      for (const int t : candidates) {
         std::array<int, 4> others{{-1, -1, -1, -1}};
         int m = 0;
         for (int k = 0; k < 4; ++k) {
@@ -399,6 +451,7 @@ class Tracer {
           if (__builtin_popcount(unsigned(mask)) != extra) continue;
           Simplex x;
           x.size = size;
+          if (size == 4) x.tet = t;
           for (int k = 0; k < n; ++k) x.ids[std::size_t(k)] = ids[std::size_t(k)];
           int at = n;
           for (int k = 0; k < m; ++k)
@@ -449,6 +502,10 @@ class Tracer {
   Eigen::MatrixXd field_;  // #V by 4, smoothed
   VertexTets adj_;
   Eigen::MatrixXd normals_;  // #V by 4 unit vertex normals
+  // #T by 4: the tet across the face opposite each tet vertex (kNone on the boundary, kMany where more than two
+  // tets share the face), filled as traces cross faces.
+  static constexpr int kUnknown = -2, kNone = -1, kMany = -3;
+  std::unique_ptr<std::atomic<int>[]> across_;
 };
 
 }  // namespace
