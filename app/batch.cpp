@@ -486,7 +486,9 @@ SummaryRow summary_row(const std::string& job, const std::string& report_json) {
     row.solve_residual = direct->value("residual", 0.0);
   }
   row.label_passes = optional_at<std::int64_t>(r, "/transport/wavefronts"_json_pointer);
+  // Label propagation: the upwind sweep's (--method upwind), else the tracing's, which has no passes.
   row.label_seconds = optional_at<double>(r, "/seconds/transport"_json_pointer);
+  if (!row.label_seconds) row.label_seconds = optional_at<double>(r, "/trace/seconds"_json_pointer);
   row.total_seconds = optional_at<double>(r, "/seconds/total"_json_pointer);
   row.peak_memory_bytes = optional_at<std::int64_t>(r, "/peak_memory_bytes"_json_pointer);
   row.cpu_seconds = optional_at<double>(r, "/cpu_seconds"_json_pointer);

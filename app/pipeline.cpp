@@ -381,6 +381,8 @@ PipelineResult run_pipeline(const PipelineOptions& options) {
     gradient = compute_gradient(mesh, laplace.s);
     seconds["gradient"] = gradient.seconds;
     progress.stage("gradient", gradient.seconds);
+  }
+  if (options.method == "upwind") {
     transport = transport_labels(
         mesh, laplace.s, gradient.vertex_field, [&](const Eigen::Vector3d& x) { return locator.closest(x).point; },
         options.transport);
@@ -388,16 +390,18 @@ PipelineResult run_pipeline(const PipelineOptions& options) {
     progress.stage("transport", transport.seconds);
   } else {
     // The closest-point baseline labels every mesh vertex with its own position (its closest point on A is
-    // taken below, like every label's); the seams then see that map's jumps.
+    // taken below, like every label's); the seams then see that map's jumps. The traced map needs no sweep: every
+    // label it outputs is traced, and the mesh vertices no surface cuts keep their position, which nothing reads.
     transport.labels = mesh.V.leftCols(3);
   }
 
   // Characteristics traced back from the vertices of B and of every slice replace their interpolated labels,
-  // and those from the vertices of the tets these surfaces cut replace the upwind labels there, which the seam
-  // split reads (so seams are cut where the traced map jumps). A trace that stalls (where T vanishes, e.g. a
-  // component born mid-morph) keeps the upwind label at the point where it stopped.
+  // and those from the vertices of the tets these surfaces cut give the labels there, which the seam split reads
+  // (so seams are cut where the traced map jumps). A trace whose flow stalls continues down the steepest descent
+  // of s; where that cannot move either (s flat: a component born mid-morph) the label is where it stopped,
+  // whose closest point on A is taken like every label's.
   TraceResult traced_total;
-  Eigen::MatrixXd mesh_labels;  // #mesh.V by 3: upwind labels, traced ones at the vertices of cut tets
+  Eigen::MatrixXd mesh_labels;  // #mesh.V by 3: traced labels at the vertices of cut tets
   std::vector<char> vertex_traced;
   if (options.method == "trace") {
     mesh_labels = transport.labels;
@@ -413,6 +417,8 @@ PipelineResult run_pipeline(const PipelineOptions& options) {
   auto add_trace = [&](const TraceResult& traced) {
     traced_total.reached += traced.reached;
     traced_total.stalled += traced.stalled;
+    traced_total.descended += traced.descended;
+    traced_total.descent_pieces += traced.descent_pieces;
     traced_total.invalid += traced.invalid;
     traced_total.tet_pieces += traced.tet_pieces;
     traced_total.face_pieces += traced.face_pieces;
@@ -422,8 +428,7 @@ PipelineResult run_pipeline(const PipelineOptions& options) {
     traced_total.seconds += traced.seconds;
   };
   auto label_at = [&](const TraceResult& traced, std::size_t i) -> Eigen::RowVector3d {
-    if (traced.status[i] == TraceStatus::Reached) return traced.end.row(Eigen::Index(i));
-    return interpolate(traced.end_point[i], transport.labels);
+    return traced.end.row(Eigen::Index(i));
   };
   auto trace_labels = [&](SliceMesh& slice) {
     if (options.method != "trace") return;
@@ -554,7 +559,7 @@ PipelineResult run_pipeline(const PipelineOptions& options) {
   const Eigen::MatrixXd& target_positions = result.target.V;
   result.mesh_vertices = mesh.vertex_count();
   result.mesh_tets = mesh.tet_count();
-  result.fallbacks = transport.fallbacks();
+  result.fallbacks = options.method == "trace" ? traced_total.stalled + traced_total.invalid : transport.fallbacks();
 
   report["inputs"] = {{"source", options.source}, {"target", options.target}};
   report["options"] = {{"voxels", options.morph.voxels},
@@ -637,6 +642,7 @@ PipelineResult run_pipeline(const PipelineOptions& options) {
   }
   report["trace"] = {{"method", options.method},
                      {"reached", traced_total.reached},
+                     {"descended", traced_total.descended},
                      {"stalled", traced_total.stalled},
                      {"invalid", traced_total.invalid},
                      {"tet_pieces", traced_total.tet_pieces},
@@ -644,8 +650,11 @@ PipelineResult run_pipeline(const PipelineOptions& options) {
                      {"edge_pieces", traced_total.edge_pieces},
                      {"max_pieces", traced_total.max_pieces},
                      {"rate_evaluations", traced_total.rate_evaluations},
+                     {"descent_pieces", traced_total.descent_pieces},
                      {"seconds", traced_total.seconds},
-                     {"fallback", "a stalled trace takes the upwind label interpolated where it stopped"}};
+                     {"fallback",
+                      "a trace whose flow stalls continues down the steepest descent of s (descended); one that "
+                      "still cannot reach A (s flat) takes the closest point of A to where it stopped (stalled)"}};
   {
     const ComponentCensus census = component_census(mesh);
     report["components"] = {
@@ -658,16 +667,19 @@ PipelineResult run_pipeline(const PipelineOptions& options) {
         {"floating_vertices", census.floating_vertices},
         {"fallback",
          "born components have s = 1 and no upwind source: upwind labels them with the closest point of A "
-         "(fallback_unreached), traces from them stall and take that label; vanishing components never reach B "
+         "(fallback_unreached), traces from them stall (s is flat, no descent) and take the closest point of A "
+         "to where they stopped; vanishing components never reach B "
          "(slices through them are labelled from A); floating ones take their mean time as s"}};
   }
-  report["transport"] = {{"fallbacks", transport.fallbacks()},
-                         {"upwind_exact", transport.upwind_exact},
-                         {"fallback_projected", transport.fallback_projected},
-                         {"fallback_neighbours", transport.fallback_neighbours},
-                         {"fallback_unreached", transport.fallback_unreached},
-                         {"cycle_breaks", transport.cycle_breaks},
-                         {"wavefronts", transport.wavefronts}};
+  // The upwind sweep's figures; the traced map (the default) runs no sweep.
+  if (options.method == "upwind")
+    report["transport"] = {{"fallbacks", transport.fallbacks()},
+                           {"upwind_exact", transport.upwind_exact},
+                           {"fallback_projected", transport.fallback_projected},
+                           {"fallback_neighbours", transport.fallback_neighbours},
+                           {"fallback_unreached", transport.fallback_unreached},
+                           {"cycle_breaks", transport.cycle_breaks},
+                           {"wavefronts", transport.wavefronts}};
 
   // Outputs are staged first and report.json (which says the run is complete) is staged last.
   std::optional<OutputDir> out;

@@ -73,7 +73,7 @@ awk -F',' -v paper="$paper" '
         v[job, col["diffusion_iterations"]] (v[job, col["diffusion_iterations"]] >= 20000 ? " (cap)" : ""),
         v[job, col["diffusion_seconds"]], v[job, col["diffusion_conv"]],
         v[job, col["solve_backend"]], v[job, col["solve_iterations"]], v[job, col["solve_seconds"]], v[job, col["solve_residual"]],
-        v[job, col["label_passes"]], v[job, col["label_seconds"]], t, ptotal / t, v[job, col["total_seconds"]], v[job, col["cpu_seconds"]]
+        (v[job, col["label_passes"]] == "" ? "trace" : v[job, col["label_passes"]]), v[job, col["label_seconds"]], t, ptotal / t, v[job, col["total_seconds"]], v[job, col["cpu_seconds"]]
     }
   }' "$out/summary.csv"
 echo

@@ -64,8 +64,11 @@ Weights rates(const Simplex& x, const Weights& w) {
   return r;
 }
 
+// Forced inline: out of line (once choose() and descend() shared the simplex enumeration) it cost cow -> horse's
+// trace 20% more time.
 template <int K>
-bool simplex_system(const TetMesh4& mesh, const Eigen::MatrixXd& field, const Eigen::MatrixXd& normals, Simplex& x) {
+__attribute__((always_inline)) inline bool simplex_system(const TetMesh4& mesh, const Eigen::MatrixXd& field,
+                                                          const Eigen::MatrixXd& normals, Simplex& x) {
   Eigen::Matrix<double, 4, K> E;
   const Eigen::Vector4d v0 = mesh.V.row(x.ids[0]).transpose();
   for (int j = 0; j < K; ++j) E.col(j) = mesh.V.row(x.ids[std::size_t(j) + 1]).transpose() - v0;
@@ -94,7 +97,8 @@ bool simplex_system(const TetMesh4& mesh, const Eigen::MatrixXd& field, const Ei
   return x.G.allFinite() && x.T.allFinite();
 }
 
-bool system_of(const TetMesh4& mesh, const Eigen::MatrixXd& field, const Eigen::MatrixXd& normals, Simplex& x) {
+__attribute__((always_inline)) inline bool system_of(const TetMesh4& mesh, const Eigen::MatrixXd& field,
+                                                     const Eigen::MatrixXd& normals, Simplex& x) {
   switch (x.size) {
     case 2:
       return simplex_system<1>(mesh, field, normals, x);
@@ -183,7 +187,8 @@ Eigen::MatrixXd vertex_normals(const TetMesh4& mesh, const VertexTets& adj) {
 
 struct Stats {
   std::int64_t pieces[5] = {0, 0, 0, 0, 0};  // by simplex size
-  std::int64_t evaluations = 0;              // of the weight rates, in integrate() and choose()
+  std::int64_t evaluations = 0;              // of the weight rates, in integrate() and choose(); descent steps
+  std::int64_t descent_pieces = 0;           // of those pieces, steps of the steepest descent of s
   std::int64_t total() const { return pieces[2] + pieces[3] + pieces[4]; }
 };
 
@@ -216,20 +221,28 @@ class Tracer {
     end = start;
     if (n == 0 || !held(ids, n)) return TraceStatus::Invalid;
     normalise(w, n);
+    TraceStatus status = follow(ids, w, n, stats);
+    if (status == TraceStatus::Stalled && options_.descend && descend(ids, w, n, stats))
+      status = TraceStatus::Descended;
+    end = MeshPoint{};
+    for (int k = 0; k < n; ++k) {
+      end.ids[std::size_t(k)] = ids[std::size_t(k)];
+      end.weights[std::size_t(k)] = w[std::size_t(k)];
+    }
+    return status;
+  }
+
+ private:
+  // Follows the interpolated flow from the support (ids, w, n) until it reaches A or stalls; (ids, w, n) end
+  // where it stopped.
+  TraceStatus follow(std::array<int, 4>& ids, std::array<double, 4>& w, int& n, Stats& stats) const {
     // Supports (sorted ids) before the last two pieces: a piece that returns the point to the support it had two
     // pieces ago (along an edge and back, where the field converges from both ends) is a stagnation point.
     std::array<int, 4> before_last{{-2, -2, -2, -2}}, last{{-2, -2, -2, -2}};
     double s_checkpoint = 0.0;
     int from_tet = -1;  // the tet the last piece crossed, when it ended on one of its faces
     for (int step = 0;; ++step) {
-      end = MeshPoint{};
-      for (int k = 0; k < n; ++k) {
-        end.ids[std::size_t(k)] = ids[std::size_t(k)];
-        end.weights[std::size_t(k)] = w[std::size_t(k)];
-      }
-      bool on_a = true;
-      for (int k = 0; k < n; ++k) on_a = on_a && mesh_.side[std::size_t(ids[std::size_t(k)])] == VertexSide::A;
-      if (on_a) return TraceStatus::Reached;
+      if (on_a(ids, n)) return TraceStatus::Reached;
       if (step >= options_.max_steps) return TraceStatus::Stalled;
       const std::array<int, 4> key = support_key(ids, n);
       if (n < 3 && key == before_last) return TraceStatus::Stalled;
@@ -247,18 +260,10 @@ class Tracer {
       if (!integrate(piece, pw, stats)) return TraceStatus::Stalled;
       ++stats.pieces[piece.size];
       from_tet = piece.tet;
-      n = 0;
-      for (int j = 0; j < piece.size; ++j)
-        if (pw(j) > options_.weight_epsilon) {
-          ids[std::size_t(n)] = piece.ids[std::size_t(j)];
-          w[std::size_t(n++)] = pw(j);
-        }
-      if (n == 0) return TraceStatus::Stalled;
-      normalise(w, n);
+      if (!take_support(piece, pw, ids, w, n)) return TraceStatus::Stalled;
     }
   }
 
- private:
   static std::array<int, 4> support_key(const std::array<int, 4>& ids, int n) {
     std::array<int, 4> key{{-1, -1, -1, -1}};
     for (int k = 0; k < n; ++k) key[std::size_t(k)] = ids[std::size_t(k)];
@@ -423,77 +428,177 @@ class Tracer {
     }
   }
 
+  // Calls visit(x) for every simplex x of `size` vertices that holds the support (ids[0..n) first in x.ids, in that
+  // order) and has a weight system: sub-simplices of the candidate tets, each face or edge once, in candidate order.
+  template <class Visit>
+  void simplices_holding(const std::array<int, 4>& ids, int n, const std::vector<int>& candidates, int size,
+                         Visit&& visit) const {
+    thread_local std::vector<std::array<int, 4>> seen;
+    seen.clear();
+    for (const int t : candidates) {
+      std::array<int, 4> others{{-1, -1, -1, -1}};
+      int m = 0;
+      for (int k = 0; k < 4; ++k) {
+        const int v = mesh_.T(t, k);
+        if (std::find(ids.begin(), ids.begin() + n, v) == ids.begin() + n) others[std::size_t(m++)] = v;
+      }
+      const int extra = size - n;
+      if (extra < 0 || extra > m) continue;
+      for (int mask = 0; mask < (1 << m); ++mask) {  // subsets of `others` with `extra` members
+        if (__builtin_popcount(unsigned(mask)) != extra) continue;
+        Simplex x;
+        x.size = size;
+        if (size == 4) x.tet = t;
+        for (int k = 0; k < n; ++k) x.ids[std::size_t(k)] = ids[std::size_t(k)];
+        int at = n;
+        for (int k = 0; k < m; ++k)
+          if (mask & (1 << k)) x.ids[std::size_t(at++)] = others[std::size_t(k)];
+        if (size < 4) {
+          std::array<int, 4> key = x.ids;
+          for (int i = 1; i < size; ++i)  // insertion sort of at most 3 ids
+            for (int j = i; j > 0 && key[std::size_t(j - 1)] > key[std::size_t(j)]; --j)
+              std::swap(key[std::size_t(j - 1)], key[std::size_t(j)]);
+          if (std::find(seen.begin(), seen.end(), key) != seen.end()) continue;
+          seen.push_back(key);
+        }
+        if (!system_of(mesh_, field_, normals_, x)) continue;
+        visit(x);
+      }
+    }
+  }
+
+  // Whether rates r (in x, support first) move the point into x: every weight outside the support grows (a rate
+  // near zero means the flow runs along a face of x, which the next class, that face itself, follows) and some
+  // weight of the support falls.
+  bool feasible(const Weights& r, int size, int n) const {
+    double largest = 0.0;  // a loop, not head(size).maxCoeff(), which GCC 12 misreads as out of bounds once inlined
+    for (int k = 0; k < size; ++k) largest = std::max(largest, std::abs(r(k)));
+    if (!(largest > 0.0)) return false;
+    bool moves = false;
+    for (int k = 0; k < size; ++k) {
+      if (k >= n && r(k) <= options_.rate_tolerance * largest) return false;
+      if (k < n && r(k) < 0.0) moves = true;
+    }
+    return moves;
+  }
+
   bool choose(const std::array<int, 4>& ids, const std::array<double, 4>& w, int n, int from_tet, Simplex& best,
               Weights& best_w, Stats& stats) const {
     Eigen::Vector4d d = Eigen::Vector4d::Zero();
     for (int k = 0; k < n; ++k) d -= w[std::size_t(k)] * field_.row(ids[std::size_t(k)]).transpose();
     bool found = false;
     double best_alignment = 0.0;
-    std::vector<std::array<int, 4>> seen;
     const double d2 = d.squaredNorm();
     if (!(d2 > 0.0)) return false;
     thread_local std::vector<int> candidates;
     support_tets(ids, n, from_tet, candidates);
+    Weights xw = Weights::Zero();
+    for (int k = 0; k < n; ++k) xw(k) = w[std::size_t(k)];
     // Tets first; faces and edges together: their spans do not nest like a tet's and its faces', and the flow along
     // an edge projects onto a skew face as a feasible but sideways direction.
-    for (int size = 4; size >= std::max(2, n) && !(found && size == 3); --size) {
-      seen.clear();
-      for (const int t : candidates) {
-        std::array<int, 4> others{{-1, -1, -1, -1}};
-        int m = 0;
-        for (int k = 0; k < 4; ++k) {
-          const int v = mesh_.T(t, k);
-          if (std::find(ids.begin(), ids.begin() + n, v) == ids.begin() + n) others[std::size_t(m++)] = v;
+    for (int size = 4; size >= std::max(2, n) && !(found && size == 3); --size)
+      simplices_holding(ids, n, candidates, size, [&](const Simplex& x) {
+        const Weights r = rates(x, xw);
+        ++stats.evaluations;
+        if (!feasible(r, x.size, n)) return;
+        // The projected flow sum_k r_k v_k (rates sum to zero), dotted with d, is its squared length: the
+        // fraction of the flow the simplex's span holds. A span that holds d only partly can still pass the
+        // feasibility test (the projection of a direction along an edge can point into a skew tet).
+        double alignment = 0.0;
+        for (int k = 0; k < x.size; ++k) alignment += r(k) * mesh_.V.row(x.ids[std::size_t(k)]).dot(d.transpose());
+        alignment /= d2;
+        if (!found || alignment > best_alignment + 1e-12) {
+          best = x;
+          best_w = xw;
+          best_alignment = alignment;
+          found = true;
         }
-        const int extra = size - n;
-        if (extra < 0 || extra > m) continue;
-        for (int mask = 0; mask < (1 << m); ++mask) {  // subsets of `others` with `extra` members
-          if (__builtin_popcount(unsigned(mask)) != extra) continue;
-          Simplex x;
-          x.size = size;
-          if (size == 4) x.tet = t;
-          for (int k = 0; k < n; ++k) x.ids[std::size_t(k)] = ids[std::size_t(k)];
-          int at = n;
-          for (int k = 0; k < m; ++k)
-            if (mask & (1 << k)) x.ids[std::size_t(at++)] = others[std::size_t(k)];
-          if (size < 4) {
-            std::array<int, 4> key = x.ids;
-            for (int i = 1; i < size; ++i)  // insertion sort of at most 3 ids
-              for (int j = i; j > 0 && key[std::size_t(j - 1)] > key[std::size_t(j)]; --j)
-                std::swap(key[std::size_t(j - 1)], key[std::size_t(j)]);
-            if (std::find(seen.begin(), seen.end(), key) != seen.end()) continue;
-            seen.push_back(key);
+      });
+    return found;
+  }
+
+  // Steepest descent of s, which is linear in every simplex, from the support (ids, w, n) to A: where the
+  // interpolated flow stalls (a sink or an orbit of T, a component whose s is nearly flat), the path of -grad s
+  // continues it. In each step the simplex holding the support whose own gradient of s, reversed, enters it and is
+  // steepest (tets first, then faces and edges, as in choose()) is crossed in a straight line to the face where
+  // it leaves: s falls in every step, so the path cannot circle. False where no simplex descends (s flat, or a
+  // local minimum of the discrete s) or after max_steps steps; (ids, w, n) then hold where it stopped.
+  bool descend(std::array<int, 4>& ids, std::array<double, 4>& w, int& n, Stats& stats) const {
+    thread_local std::vector<int> candidates;
+    int from_tet = -1;
+    for (int step = 0; step < options_.max_steps; ++step) {
+      if (on_a(ids, n)) return true;
+      support_tets(ids, n, from_tet, candidates);
+      Weights xw = Weights::Zero();
+      for (int k = 0; k < n; ++k) xw(k) = w[std::size_t(k)];
+      Simplex best;
+      Weights best_r;
+      double best_slope = 0.0;
+      bool found = false;
+      for (int size = 4; size >= std::max(2, n) && !(found && size == 3); --size)
+        simplices_holding(ids, n, candidates, size, [&](const Simplex& x) {
+          Eigen::Vector4d g = Eigen::Vector4d::Zero();  // grad s in x's span
+          for (int j = 1; j < x.size; ++j) g += (s_(x.ids[std::size_t(j)]) - s_(x.ids[0])) * x.G.col(j - 1);
+          Weights r = Weights::Zero();
+          for (int j = 1; j < x.size; ++j) {
+            r(j) = -x.G.col(j - 1).dot(g);
+            r(0) -= r(j);
           }
-          if (!system_of(mesh_, field_, normals_, x)) continue;
-          Weights xw = Weights::Zero();
-          for (int k = 0; k < n; ++k) xw(k) = w[std::size_t(k)];
-          const Weights r = rates(x, xw);
           ++stats.evaluations;
-          const double largest = r.head(size).cwiseAbs().maxCoeff();
-          bool feasible = largest > 0.0, moves = false;
-          for (int k = 0; k < size && feasible; ++k) {
-            // Outside the support a weight must grow: a rate near zero means the flow runs along a face of x,
-            // which the next class (that face itself) follows.
-            if (k >= n && r(k) <= options_.rate_tolerance * largest) feasible = false;
-            if (k < n && r(k) < 0.0) moves = true;
-          }
-          if (!feasible || !moves) continue;
-          // The projected flow sum_k r_k v_k (rates sum to zero), dotted with d, is its squared length: the
-          // fraction of the flow the simplex's span holds. A span that holds d only partly can still pass the
-          // feasibility test (the projection of a direction along an edge can point into a skew tet).
-          double alignment = 0.0;
-          for (int k = 0; k < size; ++k) alignment += r(k) * mesh_.V.row(x.ids[std::size_t(k)]).dot(d.transpose());
-          alignment /= d2;
-          if (!found || alignment > best_alignment + 1e-12) {
+          const double slope = g.squaredNorm();
+          if (!(slope > 0.0) || !feasible(r, x.size, n)) return;
+          if (!found || slope > best_slope * (1.0 + 1e-12)) {
             best = x;
-            best_w = xw;
-            best_alignment = alignment;
+            best_r = r;
+            best_slope = slope;
             found = true;
           }
+        });
+      if (!found) return false;
+      // The rates are constant in the simplex: the exit is exact.
+      double exit_time = std::numeric_limits<double>::infinity();
+      int leaving = -1;
+      for (int j = 0; j < n; ++j)
+        if (best_r(j) < 0.0 && xw(j) / -best_r(j) < exit_time) {
+          exit_time = xw(j) / -best_r(j);
+          leaving = j;
         }
-      }
+      if (leaving < 0) return false;
+      Weights next = xw + exit_time * best_r;
+      next(leaving) = 0.0;
+      for (int j = 0; j < best.size; ++j) next(j) = std::max(next(j), 0.0);
+      ++stats.pieces[best.size];
+      ++stats.descent_pieces;
+      from_tet = best.tet;
+      if (!take_support(best, next, ids, w, n)) return false;
     }
-    return found;
+    return false;
+  }
+
+  // The support (vertices of positive weight, normalised) of the point with weights `weights` in x; false, and
+  // (ids, w, n) unchanged, when no weight is positive.
+  bool take_support(const Simplex& x, const Weights& weights, std::array<int, 4>& ids, std::array<double, 4>& w,
+                    int& n) const {
+    int m = 0;
+    std::array<int, 4> next_ids{{-1, -1, -1, -1}};
+    std::array<double, 4> next_w{{0.0, 0.0, 0.0, 0.0}};
+    for (int j = 0; j < x.size; ++j)
+      if (weights(j) > options_.weight_epsilon) {
+        next_ids[std::size_t(m)] = x.ids[std::size_t(j)];
+        next_w[std::size_t(m++)] = weights(j);
+      }
+    if (m == 0) return false;
+    ids = next_ids;
+    w = next_w;
+    n = m;
+    normalise(w, n);
+    return true;
+  }
+
+  bool on_a(const std::array<int, 4>& ids, int n) const {
+    for (int k = 0; k < n; ++k)
+      if (mesh_.side[std::size_t(ids[std::size_t(k)])] != VertexSide::A) return false;
+    return true;
   }
 
   const TetMesh4& mesh_;
@@ -594,6 +699,9 @@ TraceResult CharacteristicTracer::trace(const std::vector<MeshPoint>& starts) co
       case TraceStatus::Stalled:
         ++result.stalled;
         break;
+      case TraceStatus::Descended:
+        ++result.descended;
+        break;
       case TraceStatus::Invalid:
         ++result.invalid;
         break;
@@ -602,6 +710,7 @@ TraceResult CharacteristicTracer::trace(const std::vector<MeshPoint>& starts) co
     result.face_pieces += stats[i].pieces[3];
     result.tet_pieces += stats[i].pieces[4];
     result.rate_evaluations += stats[i].evaluations;
+    result.descent_pieces += stats[i].descent_pieces;
     result.max_pieces = std::max(result.max_pieces, stats[i].total());
   }
   result.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - start_time).count();

@@ -236,6 +236,14 @@ TEST_F(Batch, SummaryRowTakesDiffusionAndSolveFromEitherSide) {
   report["solver"]["name"] = "cholmod";
   row = summary_row("t", report.dump());
   EXPECT_FALSE(row.diffusion_iterations.has_value());
+  EXPECT_DOUBLE_EQ(*row.label_seconds, 0.25);
+  // A traced map runs no upwind sweep: label propagation is the tracing, which has no passes.
+  report.erase("transport");
+  report["seconds"].erase("transport");
+  report["trace"] = {{"seconds", 0.75}};
+  row = summary_row("t", report.dump());
+  EXPECT_FALSE(row.label_passes.has_value());
+  EXPECT_DOUBLE_EQ(*row.label_seconds, 0.75);
   // Errors with commas and quotes survive the CSV.
   SummaryRow failed;
   failed.job = "f";

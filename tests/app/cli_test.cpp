@@ -238,7 +238,8 @@ TEST_F(Cli, DemoWritesEveryOutput) {
   for (const char* key : {"vertices", "tets", "target_vertices", "target_triangles"})
     EXPECT_GT(report["counts"][key].get<std::int64_t>(), 0) << key;
   EXPECT_EQ(report["solver"]["name"], "cg-amg");
-  EXPECT_TRUE(report["transport"].contains("fallbacks"));
+  EXPECT_TRUE(report["trace"].contains("stalled"));
+  EXPECT_TRUE(report["trace"].contains("descended"));
   EXPECT_GT(report["peak_memory_bytes"].get<std::int64_t>(), 0);
   // labels.txt has one line per vertex of target.obj.
   std::ifstream obj(out / "target.obj"), labels(out / "labels.txt");

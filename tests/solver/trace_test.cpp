@@ -136,7 +136,9 @@ TEST(TraceTest, StallsWhereTheFieldVanishesAndRejectsBadStarts) {
   outside.ids[0] = int(mesh.vertex_count());
   outside.weights[0] = 1.0;
   starts.push_back(outside);
-  const TraceResult r = trace_to_source(mesh, time_field(mesh), zero, starts);
+  TraceOptions no_descent;
+  no_descent.descend = false;
+  const TraceResult r = trace_to_source(mesh, time_field(mesh), zero, starts, no_descent);
   EXPECT_EQ(r.stalled, std::int64_t(ids.size()));
   EXPECT_EQ(r.invalid, 2);
   EXPECT_EQ(r.status[ids.size()], TraceStatus::Invalid);
@@ -157,10 +159,46 @@ TEST(TraceTest, TracesCirclingAStagnantFieldStallAfterOneProgressWindow) {
   const std::vector<MeshPoint> starts = b_vertices(mesh, ids);
   TraceOptions options;
   options.progress_window = 64;
+  options.descend = false;
   const TraceResult r = trace_to_source(mesh, time_field(mesh), field, starts, options);
   EXPECT_EQ(r.reached, 0);
   EXPECT_EQ(r.stalled, std::int64_t(starts.size()));
   EXPECT_LE(r.max_pieces, options.progress_window + 1);
+
+  // With the descent (the default) each stalled trace goes on down s = t, which on the product mesh runs straight
+  // down in time: it reaches A under the point where the flow stalled, which the circling kept on the sphere.
+  options.descend = true;
+  const TraceResult d = trace_to_source(mesh, time_field(mesh), field, starts, options);
+  EXPECT_EQ(d.descended, std::int64_t(starts.size()));
+  EXPECT_EQ(d.stalled, 0);
+  EXPECT_GT(d.descent_pieces, 0);
+  for (std::size_t i = 0; i < starts.size(); ++i) {
+    ASSERT_EQ(d.status[i], TraceStatus::Descended);
+    EXPECT_NEAR(d.end.row(Eigen::Index(i)).norm(), 1.0, 0.05) << i;  // on the unit icosphere's facets
+    Eigen::Vector3d stop = Eigen::Vector3d::Zero();
+    for (int k = 0; k < 4; ++k)
+      if (r.end_point[i].ids[std::size_t(k)] >= 0)
+        stop += r.end_point[i].weights[std::size_t(k)] *
+                mesh.V.row(r.end_point[i].ids[std::size_t(k)]).head<3>().transpose();
+    EXPECT_LT((d.end.row(Eigen::Index(i)).transpose() - stop).norm(), 1e-9) << i;
+  }
+}
+
+TEST(TraceTest, DescentReachesAWhereTheFieldVanishesButNotWhereSIsFlat) {
+  const TetMesh4 mesh = product_mesh(octahedron(), 2, 1.0);
+  const Eigen::MatrixXd zero = Eigen::MatrixXd::Zero(mesh.vertex_count(), 4);
+  std::vector<int> ids;
+  const std::vector<MeshPoint> starts = b_vertices(mesh, ids);
+  // No flow at all: the descent of s = t takes every B vertex straight down to its own copy on A.
+  const TraceResult r = trace_to_source(mesh, time_field(mesh), zero, starts);
+  EXPECT_EQ(r.descended, std::int64_t(ids.size()));
+  for (std::size_t i = 0; i < ids.size(); ++i)
+    EXPECT_LT((r.end.row(Eigen::Index(i)) - mesh.V.row(ids[i]).head<3>()).norm(), 1e-12) << i;
+  // s flat (a born component has s = 1 throughout): nothing descends, every trace stalls where it started.
+  const TraceResult flat = trace_to_source(mesh, Eigen::VectorXd::Ones(mesh.vertex_count()), zero, starts);
+  EXPECT_EQ(flat.stalled, std::int64_t(ids.size()));
+  EXPECT_EQ(flat.descended, 0);
+  for (std::size_t i = 0; i < ids.size(); ++i) EXPECT_EQ(flat.end_point[i].ids[0], ids[i]);
 }
 
 TEST(TraceTest, EdgePointsSplitSliceVerticesOverTheirEdges) {
