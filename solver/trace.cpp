@@ -494,26 +494,42 @@ class Tracer {
     support_tets(ids, n, from_tet, candidates);
     Weights xw = Weights::Zero();
     for (int k = 0; k < n; ++k) xw(k) = w[std::size_t(k)];
+    auto visit = [&](const Simplex& x) {
+      const Weights r = rates(x, xw);
+      ++stats.evaluations;
+      if (!feasible(r, x.size, n)) return;
+      // The projected flow sum_k r_k v_k (rates sum to zero), dotted with d, is its squared length: the
+      // fraction of the flow the simplex's span holds. A span that holds d only partly can still pass the
+      // feasibility test (the projection of a direction along an edge can point into a skew tet).
+      double alignment = 0.0;
+      for (int k = 0; k < x.size; ++k) alignment += r(k) * mesh_.V.row(x.ids[std::size_t(k)]).dot(d.transpose());
+      alignment /= d2;
+      if (!found || alignment > best_alignment + 1e-12) {
+        best = x;
+        best_w = xw;
+        best_alignment = alignment;
+        found = true;
+      }
+    };
+    if (n == 3 && from_tet >= 0 && candidates.size() == 2) {
+      // On the face through which the last piece left from_tet, the flow nearly always enters the tet across it:
+      // that one is tried alone first, and from_tet only if it fails (where both are feasible, in a star folded
+      // over its normal, the one across now wins instead of the better aligned). A fifth fewer weight systems
+      // on cow -> horse.
+      thread_local std::vector<int> one;
+      one.assign(1, candidates[0] == from_tet ? candidates[1] : candidates[0]);
+      simplices_holding(ids, n, one, 4, visit);
+      if (found) return true;
+      one.assign(1, from_tet);
+      simplices_holding(ids, n, one, 4, visit);
+      if (found) return true;
+      simplices_holding(ids, n, candidates, 3, visit);
+      return found;
+    }
     // Tets first; faces and edges together: their spans do not nest like a tet's and its faces', and the flow along
     // an edge projects onto a skew face as a feasible but sideways direction.
     for (int size = 4; size >= std::max(2, n) && !(found && size == 3); --size)
-      simplices_holding(ids, n, candidates, size, [&](const Simplex& x) {
-        const Weights r = rates(x, xw);
-        ++stats.evaluations;
-        if (!feasible(r, x.size, n)) return;
-        // The projected flow sum_k r_k v_k (rates sum to zero), dotted with d, is its squared length: the
-        // fraction of the flow the simplex's span holds. A span that holds d only partly can still pass the
-        // feasibility test (the projection of a direction along an edge can point into a skew tet).
-        double alignment = 0.0;
-        for (int k = 0; k < x.size; ++k) alignment += r(k) * mesh_.V.row(x.ids[std::size_t(k)]).dot(d.transpose());
-        alignment /= d2;
-        if (!found || alignment > best_alignment + 1e-12) {
-          best = x;
-          best_w = xw;
-          best_alignment = alignment;
-          found = true;
-        }
-      });
+      simplices_holding(ids, n, candidates, size, visit);
     return found;
   }
 
