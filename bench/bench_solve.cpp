@@ -32,7 +32,7 @@
 #include <string>
 #include <vector>
 
-#include "io/mesh_io.h"
+#include "bench/bench_cases.h"
 #include "mesh/extract.h"
 #include "mesh/morph.h"
 #include "mesh/shapes.h"
@@ -60,19 +60,6 @@ const std::vector<Case>& cases() {
   return all;
 }
 
-std::string models_dir() {
-  const char* env = std::getenv("MORPHMAP_MODELS");
-  return env ? env : "../shared/data/models";
-}
-
-/// Each surface scaled into its own bounding box centred at the origin, half its largest side = 1 (the
-/// pipeline's --align bbox, app/pipeline.cpp normalise()).
-void normalise(morphmap::Surface& surface) {
-  const Eigen::AlignedBox3d box = morphmap::bounding_box(surface.V);
-  const Eigen::Vector3d center = box.center();
-  surface.V = (surface.V.rowwise() - center.transpose()) / (0.5 * box.sizes().maxCoeff());
-}
-
 struct System {
   morphmap::DirichletSystem laplace;
   std::int64_t tets = 0;
@@ -87,29 +74,8 @@ const System& system_for(const Case& c) {
   if (slot) return *slot;
   slot = std::make_unique<System>();
   morphmap::Surface A, B;
-  const std::string dir = models_dir();
-  if (c.morph == "sphere-torus") {
-    B = morphmap::make_shape(morphmap::parse_shape_spec("torus"), std::nullopt);
-    A = morphmap::make_shape(morphmap::parse_shape_spec("sphere"), morphmap::bounding_box(B.V));
-  } else {
-    const std::string a_path = dir + "/cow.off";
-    const std::string b_path = dir + (c.morph == "sphere-bunny" ? "/bunny_closed.obj" : "/horse.obj");
-    for (const std::string& path :
-         c.morph == "sphere-bunny" ? std::vector<std::string>{b_path} : std::vector<std::string>{a_path, b_path}) {
-      if (!std::filesystem::exists(path)) {
-        slot->error = path + " not found: set MORPHMAP_MODELS to the models folder";
-        return *slot;
-      }
-    }
-    B = morphmap::read_surface(b_path);
-    if (c.morph == "sphere-bunny") {
-      A = morphmap::make_shape(morphmap::parse_shape_spec("sphere"), morphmap::bounding_box(B.V));
-    } else {
-      A = morphmap::read_surface(a_path);
-      normalise(A);
-      normalise(B);
-    }
-  }
+  slot->error = bench::case_surfaces(c.morph, A, B);
+  if (!slot->error.empty()) return *slot;
   morphmap::MorphOptions morph_options;
   morph_options.voxels = c.voxels;
   const morphmap::MorphResult morph = morphmap::build_morph(A, B, morph_options);
