@@ -335,12 +335,14 @@ void prepare_job_folder(const fs::path& dir, const BatchJob& job) {
 const std::vector<std::string> kStages = {"load",     "morph",     "extract", "quality",  "laplace", "compare",
                                           "gradient", "transport", "map",     "transfer", "write"};
 
-// The stage after `finished`, or "" when `finished` is not a stage name.
-std::string next_stage(const std::string& finished, bool compares) {
+// The stage after `finished`, or "" when `finished` is not a stage name. A job runs "compare" only with
+// --compare-solvers and "transport" (the upwind sweep) only with --method upwind.
+std::string next_stage(const std::string& finished, bool compares, bool upwind) {
   auto it = std::find(kStages.begin(), kStages.end(), finished);
   if (it == kStages.end()) return {};
   ++it;
   if (it != kStages.end() && *it == "compare" && !compares) ++it;
+  if (it != kStages.end() && *it == "transport" && !upwind) ++it;
   return it == kStages.end() ? std::string("finishing") : *it;
 }
 
@@ -565,6 +567,8 @@ BatchResult run_batch(const BatchOptions& options) {
     argv.insert(argv.end(), job.args.begin(), job.args.end());
     argv.insert(argv.end(), {"-o", dir.string(), "--progress"});
     const bool compares = std::find(job.args.begin(), job.args.end(), "--compare-solvers") != job.args.end();
+    const auto method = std::find(job.args.begin(), job.args.end(), "--method");
+    const bool upwind = method != job.args.end() && method + 1 != job.args.end() && *(method + 1) == "upwind";
     std::string stage = "load";
     const ChildOutcome run = run_child(
         argv, (dir / "map.log").string(),
@@ -574,7 +578,7 @@ BatchResult run_batch(const BatchOptions& options) {
           std::istringstream words(line.substr(tag.size()));
           std::string finished;
           words >> finished;
-          const std::string next = next_stage(finished, compares);
+          const std::string next = next_stage(finished, compares, upwind);
           if (!next.empty()) stage = next;
         },
         [&](double seconds) {
