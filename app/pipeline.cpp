@@ -137,7 +137,7 @@ SliceMesh user_target_mesh(const PipelineOptions& options, const Frame& frame_b,
   return out;
 }
 
-// The label at a mesh point: the weighted labels of its vertices.
+// The mesh point at vertex v.
 MeshPoint vertex_point(int v) {
   MeshPoint p;
   p.ids[0] = v;
@@ -145,6 +145,7 @@ MeshPoint vertex_point(int v) {
   return p;
 }
 
+// The label at a mesh point: the weighted labels of its vertices.
 Eigen::RowVector3d interpolate(const MeshPoint& p, const Eigen::MatrixXd& labels) {
   Eigen::RowVector3d label = Eigen::RowVector3d::Zero();
   for (int k = 0; k < 4; ++k)
@@ -434,9 +435,6 @@ PipelineResult run_pipeline(const PipelineOptions& options) {
     traced_total.max_pieces = std::max(traced_total.max_pieces, traced.max_pieces);
     traced_total.seconds += traced.seconds;
   };
-  auto label_at = [&](const TraceResult& traced, std::size_t i) -> Eigen::RowVector3d {
-    return traced.end.row(Eigen::Index(i));
-  };
   auto trace_labels = [&](SliceMesh& slice) {
     if (options.method != "trace") return;
     std::vector<MeshPoint> starts = edge_points(slice.source_edge, slice.edge_weight);
@@ -451,8 +449,9 @@ PipelineResult run_pipeline(const PipelineOptions& options) {
         starts.push_back(vertex_point(v));
       }
     const TraceResult traced = tracer->trace(starts);
-    for (std::size_t i = 0; i < own; ++i) slice.labels.row(Eigen::Index(i)) = label_at(traced, i);
-    for (std::size_t j = 0; j < vertices.size(); ++j) mesh_labels.row(vertices[j]) = label_at(traced, own + j);
+    slice.labels = traced.end.topRows(Eigen::Index(own));
+    for (std::size_t j = 0; j < vertices.size(); ++j)
+      mesh_labels.row(vertices[j]) = traced.end.row(Eigen::Index(own + j));
     add_trace(traced);
   };
 
@@ -470,7 +469,7 @@ PipelineResult run_pipeline(const PipelineOptions& options) {
     add_trace(traced);
     std::vector<char> provisional(std::size_t(mesh.vertex_count()), 0);
     for (Eigen::Index i = 0; i < target.V.rows(); ++i) {
-      target.labels.row(i) = label_at(traced, std::size_t(i));
+      target.labels.row(i) = traced.end.row(i);
       const int v = target.source_edge(i, 0);  // a B vertex: source_edge(i, 1) == v, weight 0
       mesh_labels.row(v) = target.labels.row(i);
       vertex_traced[std::size_t(v)] = 1;
@@ -506,7 +505,7 @@ PipelineResult run_pipeline(const PipelineOptions& options) {
     const TraceResult lower = tracer->trace(starts);
     add_trace(lower);
     for (std::size_t j = 0; j < vertices.size(); ++j) {
-      mesh_labels.row(vertices[j]) = label_at(lower, j);
+      mesh_labels.row(vertices[j]) = lower.end.row(Eigen::Index(j));
       vertex_traced[std::size_t(vertices[j])] = 1;
     }
     target_labels_4d = mesh_labels;
@@ -522,7 +521,7 @@ PipelineResult run_pipeline(const PipelineOptions& options) {
       Eigen::MatrixXd labels(Eigen::Index(points.size()), 3);
       if (options.method == "trace") {
         const TraceResult traced = tracer->trace(points);
-        for (std::size_t i = 0; i < points.size(); ++i) labels.row(Eigen::Index(i)) = label_at(traced, i);
+        labels = traced.end;
         add_trace(traced);
       } else {
         for (std::size_t i = 0; i < points.size(); ++i)

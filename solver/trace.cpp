@@ -372,11 +372,6 @@ class Tracer {
     return true;  // a long piece: continue from where it got to
   }
 
-  // The simplex the point (support ids, weights w, n vertices) moves into: the tets holding the support, else
-  // their faces and edges; feasible when every weight outside the support grows and some weight of the support
-  // decreases. Tets move the flow along the vertex normal, so in a star that does not fold over its normal
-  // exactly one tet is feasible for a generic direction; otherwise the one whose velocity is best aligned with
-  // the flow wins, ties to the larger simplex, then to the first found (lowest tet index).
   // The tets holding the support, in increasing index. On a face of from_tet (the common case: a piece ended on
   // a face of its tet) they are from_tet and its neighbour across that face, cached per (tet, face).
   void support_tets(const std::array<int, 4>& ids, int n, int from_tet, std::vector<int>& out) const {
@@ -467,6 +462,16 @@ class Tracer {
     }
   }
 
+  // simplices_holding over the classes in order, tets first, then faces and edges together (their spans do not nest
+  // like a tet's and its faces', and a flow along an edge projects onto a skew face as a feasible but sideways
+  // direction); faces and edges only when no tet was found (`found`, which visit sets).
+  template <class Visit>
+  void simplices_by_class(const std::array<int, 4>& ids, int n, const std::vector<int>& candidates, const bool& found,
+                          Visit&& visit) const {
+    for (int size = 4; size >= std::max(2, n) && !(found && size == 3); --size)
+      simplices_holding(ids, n, candidates, size, visit);
+  }
+
   // Whether rates r (in x, support first) move the point into x: every weight outside the support grows (a rate
   // near zero means the flow runs along a face of x, which the next class, that face itself, follows) and some
   // weight of the support falls.
@@ -482,6 +487,11 @@ class Tracer {
     return moves;
   }
 
+  // The simplex the point (support ids, weights w, n vertices) moves into: the tets holding the support, else
+  // their faces and edges; feasible when every weight outside the support grows and some weight of the support
+  // decreases. Tets move the flow along the vertex normal, so in a star that does not fold over its normal
+  // exactly one tet is feasible for a generic direction; otherwise the one whose velocity is best aligned with
+  // the flow wins, ties to the larger simplex, then to the first found (lowest tet index).
   bool choose(const std::array<int, 4>& ids, const std::array<double, 4>& w, int n, int from_tet, Simplex& best,
               Weights& best_w, Stats& stats) const {
     Eigen::Vector4d d = Eigen::Vector4d::Zero();
@@ -526,10 +536,7 @@ class Tracer {
       simplices_holding(ids, n, candidates, 3, visit);
       return found;
     }
-    // Tets first; faces and edges together: their spans do not nest like a tet's and its faces', and the flow along
-    // an edge projects onto a skew face as a feasible but sideways direction.
-    for (int size = 4; size >= std::max(2, n) && !(found && size == 3); --size)
-      simplices_holding(ids, n, candidates, size, visit);
+    simplices_by_class(ids, n, candidates, found, visit);
     return found;
   }
 
@@ -551,25 +558,24 @@ class Tracer {
       Weights best_r;
       double best_slope = 0.0;
       bool found = false;
-      for (int size = 4; size >= std::max(2, n) && !(found && size == 3); --size)
-        simplices_holding(ids, n, candidates, size, [&](const Simplex& x) {
-          Eigen::Vector4d g = Eigen::Vector4d::Zero();  // grad s in x's span
-          for (int j = 1; j < x.size; ++j) g += (s_(x.ids[std::size_t(j)]) - s_(x.ids[0])) * x.G.col(j - 1);
-          Weights r = Weights::Zero();
-          for (int j = 1; j < x.size; ++j) {
-            r(j) = -x.G.col(j - 1).dot(g);
-            r(0) -= r(j);
-          }
-          ++stats.evaluations;
-          const double slope = g.squaredNorm();
-          if (!(slope > 0.0) || !feasible(r, x.size, n)) return;
-          if (!found || slope > best_slope * (1.0 + 1e-12)) {
-            best = x;
-            best_r = r;
-            best_slope = slope;
-            found = true;
-          }
-        });
+      simplices_by_class(ids, n, candidates, found, [&](const Simplex& x) {
+        Eigen::Vector4d g = Eigen::Vector4d::Zero();  // grad s in x's span
+        for (int j = 1; j < x.size; ++j) g += (s_(x.ids[std::size_t(j)]) - s_(x.ids[0])) * x.G.col(j - 1);
+        Weights r = Weights::Zero();
+        for (int j = 1; j < x.size; ++j) {
+          r(j) = -x.G.col(j - 1).dot(g);
+          r(0) -= r(j);
+        }
+        ++stats.evaluations;
+        const double slope = g.squaredNorm();
+        if (!(slope > 0.0) || !feasible(r, x.size, n)) return;
+        if (!found || slope > best_slope * (1.0 + 1e-12)) {
+          best = x;
+          best_r = r;
+          best_slope = slope;
+          found = true;
+        }
+      });
       if (!found) return false;
       // The rates are constant in the simplex: the exit is exact.
       double exit_time = std::numeric_limits<double>::infinity();
