@@ -256,8 +256,9 @@ class Tracer {
       last = key;
       Simplex piece;
       Weights pw;
-      if (!choose(ids, w, n, from_tet, piece, pw, stats)) return TraceStatus::Stalled;
-      if (!integrate(piece, pw, stats)) return TraceStatus::Stalled;
+      Weights rate;
+      if (!choose(ids, w, n, from_tet, piece, pw, rate, stats)) return TraceStatus::Stalled;
+      if (!integrate(piece, pw, rate, stats)) return TraceStatus::Stalled;
       ++stats.pieces[piece.size];
       from_tet = piece.tet;
       if (!take_support(piece, pw, ids, w, n)) return TraceStatus::Stalled;
@@ -305,7 +306,8 @@ class Tracer {
   // TraceOptions::progress over `stagnation_substeps` steps (a sink or a stagnation point of T inside x; without
   // this test such a trace took 64 steps a piece until the progress window stopped it, half of cow -> horse's
   // evaluations).
-  bool integrate(const Simplex& x, Weights& pw, Stats& stats) const {
+  // `rate` is rates(x, pw), which choose() evaluated already.
+  bool integrate(const Simplex& x, Weights& pw, const Weights& rate, Stats& stats) const {
     constexpr int stagnation_substeps = 8;
     const int m = x.size;
     double s_checkpoint = s_at(x, pw);
@@ -319,8 +321,8 @@ class Tracer {
         if (!(s_now < s_checkpoint - options_.progress)) return false;
         s_checkpoint = s_now;
       }
-      const Weights r = rates(x, pw);
-      ++stats.evaluations;
+      const Weights r = sub == 0 ? rate : rates(x, pw);
+      stats.evaluations += sub == 0 ? 0 : 1;
       double exit_time = std::numeric_limits<double>::infinity();
       for (int j = 0; j < m; ++j)
         if (!pinned[std::size_t(j)] && r(j) < 0.0) exit_time = std::min(exit_time, pw(j) / -r(j));
@@ -497,7 +499,7 @@ class Tracer {
   // exactly one tet is feasible for a generic direction; otherwise the one whose velocity is best aligned with
   // the flow wins, ties to the larger simplex, then to the first found (lowest tet index).
   bool choose(const std::array<int, 4>& ids, const std::array<double, 4>& w, int n, int from_tet, Simplex& best,
-              Weights& best_w, Stats& stats) const {
+              Weights& best_w, Weights& best_r, Stats& stats) const {
     Eigen::Vector4d d = Eigen::Vector4d::Zero();
     for (int k = 0; k < n; ++k) d -= w[std::size_t(k)] * field_.row(ids[std::size_t(k)]).transpose();
     bool found = false;
@@ -521,6 +523,7 @@ class Tracer {
       if (!found || alignment > best_alignment + 1e-12) {
         best = x;
         best_w = xw;
+        best_r = r;
         best_alignment = alignment;
         found = true;
       }
