@@ -1,7 +1,8 @@
 // Tangent field T = grad s on the tetrahedral 3-manifold in R^4 (paper §6.2). The paper's equation 5 fits a
 // linear function through the origin; we fit the affine one inside each tet's hull instead,
-// grad s = E (E^T E)^-1 [s1 - s0, s2 - s0, s3 - s0]^T (evaluated through QR), which is exact for affine s and independent of where
-// the origin lies. Vertex values are the volume-weighted average of the incident tets, as in the paper.
+// grad s = E (E^T E)^-1 [s1 - s0, s2 - s0, s3 - s0]^T (evaluated through QR), which is exact for affine s and
+// independent of where the origin lies. Vertex values are the volume-weighted average of the incident tets, as in the
+// paper.
 #include "solver/gradient.h"
 
 #include <tbb/parallel_for.h>
@@ -22,6 +23,34 @@ namespace {
 // the gradients cancel (an extremum or saddle of s): it has no direction, and normalising rounding noise
 // would invent one.
 constexpr double kCancellationRatio = 1e-12;
+
+/// E (E^T E)^-1 ds for E 4 by 3 of full rank, as Q R^-T ds with E = Q R by Gram-Schmidt with one
+/// reorthogonalisation per column ("twice is enough", Giraud et al. 2005: Q orthonormal to rounding level, as
+/// Householder's, for any E of numerical full rank). Written out because Eigen's HouseholderQR works on dynamic
+/// blocks even at this size and took a tenth of cow -> horse's whole run.
+Eigen::Vector4d qr_gradient(const Eigen::Matrix<double, 4, 3>& E, const Eigen::Vector3d& ds) {
+  Eigen::Matrix<double, 4, 3> Q;
+  Eigen::Matrix3d R = Eigen::Matrix3d::Zero();
+  for (int j = 0; j < 3; ++j) {
+    Eigen::Vector4d v = E.col(j);
+    for (int pass = 0; pass < 2; ++pass)
+      for (int i = 0; i < j; ++i) {
+        const double c = Q.col(i).dot(v);
+        R(i, j) += c;
+        v -= c * Q.col(i);
+      }
+    R(j, j) = v.norm();
+    Q.col(j) = v / R(j, j);
+  }
+  // y = R^-T ds by forward substitution.
+  Eigen::Vector3d y;
+  for (int i = 0; i < 3; ++i) {
+    double sum = ds(i);
+    for (int k = 0; k < i; ++k) sum -= R(k, i) * y(k);
+    y(i) = sum / R(i, i);
+  }
+  return Q * y;
+}
 
 }  // namespace
 
@@ -53,11 +82,7 @@ GradientResult compute_gradient(const TetMesh4& mesh, const Eigen::VectorXd& s) 
     const Eigen::Vector3d ds(s(T(t, 1)) - s(T(t, 0)), s(T(t, 2)) - s(T(t, 0)), s(T(t, 3)) - s(T(t, 0)));
     // With E = Q R, E (E^T E)^-1 ds = Q R^-T ds: the QR form has E's conditioning instead of its square,
     // which matters on the slivers next to lattice points (identity morph: T off by 3e-9 with the Gram inverse).
-    const Eigen::HouseholderQR<Eigen::Matrix<double, 4, 3>> qr(E);
-    const Eigen::Matrix3d R = qr.matrixQR().topLeftCorner<3, 3>().triangularView<Eigen::Upper>();
-    Eigen::Vector4d y = Eigen::Vector4d::Zero();
-    y.head<3>() = R.transpose().triangularView<Eigen::Lower>().solve(ds);
-    result.tet_gradient.row(t) = (qr.householderQ() * y).transpose();
+    result.tet_gradient.row(t) = qr_gradient(E, ds).transpose();
     result.tet_volume(t) = volume;
   });
 
