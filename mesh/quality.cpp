@@ -4,17 +4,15 @@
 #include "mesh/quality.h"
 
 #include <tbb/blocked_range.h>
+#include <tbb/enumerable_thread_specific.h>
 #include <tbb/parallel_for.h>
 #include <tbb/parallel_reduce.h>
 
 #include <Eigen/Dense>
 #include <algorithm>
-#include <array>
-#include <atomic>
 #include <chrono>
 #include <cmath>
 #include <limits>
-#include <memory>
 #include <sstream>
 #include <utility>
 
@@ -115,14 +113,6 @@ double measurable_volume(const Points4& V, const TetIndices& T, Eigen::Index t) 
   return det > kRoundoffVolumeRatio * hadamard && std::isfinite(det) ? det / 6.0 : 0.0;
 }
 
-/// Vertex ids of tet t in increasing order: the first is the smaller end of 3 of the tet's edges, the second
-/// of 2, the third of 1, so 3 bucket reservations cover all 6 edges.
-std::array<int, 4> sorted_vertices(const TetIndices& T, Eigen::Index t) {
-  std::array<int, 4> v = {T(t, 0), T(t, 1), T(t, 2), T(t, 3)};
-  std::sort(v.begin(), v.end());
-  return v;
-}
-
 /// Number of leading entries of the decreasing array edge_cos[0 .. count) that are >= c, i.e. the histogram
 /// bin of a dihedral with cosine c. Branch-free halving: the bins of neighbouring angles are unpredictable.
 int bin_of(const double* edge_cos, int count, double c) {
@@ -154,24 +144,12 @@ struct ChunkStats {
 
 /// Dihedral extremes are chosen by cosine (cheap, monotone) and evaluated with atan2 only at the end.
 struct ChunkAngles {
-  double smallest_cos = 2.0;     ///< cosine of the largest dihedral (cos decreases on [0, pi])
-  double largest_cos = -2.0;     ///< cosine of the smallest dihedral
+  double smallest_cos = 2.0;  ///< cosine of the largest dihedral (cos decreases on [0, pi])
+  double largest_cos = -2.0;  ///< cosine of the smallest dihedral
   Eigen::Index largest_tet = -1, smallest_tet = -1;
   int largest_edge = 0, smallest_edge = 0;
   std::int64_t obtuse = 0;
   std::int64_t measured_tets = 0;
-};
-
-/// A tet edge waiting for its slot in the bucket of its smaller vertex.
-struct PendingEdge {
-  int a, b;      ///< smaller and larger vertex
-  double value;  ///< vol * grad(lambda_i) . grad(lambda_j) of this tet
-};
-
-/// A tet whose edges wait for their slots: the buckets of its three smallest vertices, reserved together.
-struct PendingTet {
-  std::array<int, 4> sorted;
-  std::array<std::int64_t, 3> base;
 };
 
 /// Dihedral at local edge e of tet t, in degrees: pi minus the angle between the gradients of the other two hats
@@ -233,28 +211,9 @@ QualityResult measure_quality(const TetMesh4& mesh, const QualityOptions& option
   // Strict: in an all-flat mesh (bound 0) every tet is degenerate, so nothing below divides by a zero volume.
   auto usable = [&](Eigen::Index t) { return volume[to_size(t)] > degenerate_volume; };
 
-  // Bucket every tet edge (a, b), a < b, under its smaller vertex a: a counting sort keyed by a, so that
-  // summing K_ij needs only small per-vertex sorts instead of one global sort of all tet edges.
-  std::unique_ptr<std::atomic<std::int32_t>[]> fill(new std::atomic<std::int32_t>[to_size(n)]);
-  tbb::parallel_for(tbb::blocked_range<Eigen::Index>(0, n), [&](const tbb::blocked_range<Eigen::Index>& r) {
-    for (Eigen::Index i = r.begin(); i < r.end(); ++i) fill[to_size(i)].store(0, std::memory_order_relaxed);
-  });
-  tbb::parallel_for(Eigen::Index(0), tet_chunks, [&](Eigen::Index chunk) {
-    const Eigen::Index end = std::min(tets, (chunk + 1) * kChunkTets);
-    for (Eigen::Index t = chunk * kChunkTets; t < end; ++t) {
-      if (!usable(t)) continue;
-      const std::array<int, 4> v = sorted_vertices(T, t);
-      for (int r = 0; r < 3; ++r) fill[std::size_t(v[std::size_t(r)])].fetch_add(3 - r, std::memory_order_relaxed);
-    }
-  });
-  std::vector<std::int64_t> offset(to_size(n) + 1, 0);
-  for (Eigen::Index i = 0; i < n; ++i) {
-    offset[to_size(i) + 1] = offset[to_size(i)] + fill[to_size(i)].load(std::memory_order_relaxed);
-    fill[to_size(i)].store(0, std::memory_order_relaxed);
-  }
-  // Structure of arrays: 12 bytes per tet edge instead of a padded 16-byte pair.
-  std::vector<int> other(std::size_t(offset.back()));
-  std::vector<double> value(std::size_t(offset.back()));
+  // Each tet's six edge stiffnesses vol * grad(lambda_i) . grad(lambda_j), in kEdge order, written in tet order
+  // by the angle pass and summed per edge below.
+  std::vector<double> edge_value(to_size(tets) * 6, 0.0);
 
   // Angles, histogram and the per-tet stiffness. Angles are classified by cosine against precomputed bin
   // edges, which saves six atan2 per tet; near the classification boundaries (well inside (0, 180)) the cosine
@@ -262,71 +221,39 @@ QualityResult measure_quality(const TetMesh4& mesh, const QualityOptions& option
   std::vector<double> bin_edge_cos(std::size_t(bins - 1));  // cos of the upper edge of bins 0 .. bins-2, decreasing
   for (int b = 1; b < bins; ++b) bin_edge_cos[std::size_t(b - 1)] = std::cos(kPi * b / bins);
   const double obtuse_above = options.obtuse_threshold_degrees + kAngleSlackDegrees;
-  const double obtuse_cos = obtuse_above >= 180.0 ? -std::numeric_limits<double>::infinity()
-                                                  : std::cos(obtuse_above * (kPi / 180.0));
+  const double obtuse_cos =
+      obtuse_above >= 180.0 ? -std::numeric_limits<double>::infinity() : std::cos(obtuse_above * (kPi / 180.0));
   std::vector<ChunkAngles> angle_stats(to_size(tet_chunks));
   std::vector<std::int64_t> chunk_histogram(to_size(tet_chunks) * std::size_t(bins), 0);
   tbb::parallel_for(Eigen::Index(0), tet_chunks, [&](Eigen::Index chunk) {
     ChunkAngles& s = angle_stats[to_size(chunk)];
     std::int64_t* histogram = chunk_histogram.data() + to_size(chunk) * std::size_t(bins);
     const Eigen::Index end = std::min(tets, (chunk + 1) * kChunkTets);
-    // Slots are reserved for a batch of tets at a time, three per tet: an atomic increment is a full fence on
-    // x86, and one per edge interleaved with the scattered (cache-missing) stores serialised them (~30% of the
-    // stage). The slot order inside a bucket still depends on the scheduling; the per-vertex sort below
-    // removes that before anything is summed.
-    constexpr int kBatchTets = 64;
-    std::array<PendingTet, kBatchTets> batch_tets;
-    std::array<PendingEdge, 6 * kBatchTets> batch_edges;
     Eigen::Vector3d w[4];
-    for (Eigen::Index first = chunk * kChunkTets; first < end; first += kBatchTets) {
-      const Eigen::Index last = std::min(end, first + kBatchTets);
-      std::size_t pending = 0;
-      for (Eigen::Index t = first; t < last; ++t) {
-        if (!usable(t)) continue;
-        const Eigen::Matrix3d R = hull_coordinates(V, T, t);
-        scaled_gradients(R, w);
-        ++s.measured_tets;
-        const double inverse_norm[4] = {1.0 / w[0].norm(), 1.0 / w[1].norm(), 1.0 / w[2].norm(), 1.0 / w[3].norm()};
-        // vol * grad_i . grad_j = (|det| / 6) * (w_i . w_j) / det^2.
-        const double stiffness_scale = 1.0 / (6.0 * std::abs(hull_determinant(R)));
-        PendingEdge* edges = batch_edges.data() + 6 * pending;
-        for (int e = 0; e < 6; ++e) {
-          const int k = kOpposite[e][0], l = kOpposite[e][1];
-          const double c = -w[k].dot(w[l]) * inverse_norm[k] * inverse_norm[l];  // cosine of the dihedral at e
-          if (c < s.smallest_cos) {
-            s.smallest_cos = c;
-            s.largest_tet = t;
-            s.largest_edge = e;
-          }
-          if (c > s.largest_cos) {
-            s.largest_cos = c;
-            s.smallest_tet = t;
-            s.smallest_edge = e;
-          }
-          s.obtuse += c < obtuse_cos ? 1 : 0;
-          histogram[bin_of(bin_edge_cos.data(), bins - 1, c)] += 1;
-          const int vi = T(t, kEdge[e][0]), vj = T(t, kEdge[e][1]);
-          edges[e] = {std::min(vi, vj), std::max(vi, vj), w[kEdge[e][0]].dot(w[kEdge[e][1]]) * stiffness_scale};
+    for (Eigen::Index t = chunk * kChunkTets; t < end; ++t) {
+      if (!usable(t)) continue;
+      const Eigen::Matrix3d R = hull_coordinates(V, T, t);
+      scaled_gradients(R, w);
+      ++s.measured_tets;
+      const double inverse_norm[4] = {1.0 / w[0].norm(), 1.0 / w[1].norm(), 1.0 / w[2].norm(), 1.0 / w[3].norm()};
+      // vol * grad_i . grad_j = (|det| / 6) * (w_i . w_j) / det^2.
+      const double stiffness_scale = 1.0 / (6.0 * std::abs(hull_determinant(R)));
+      for (int e = 0; e < 6; ++e) {
+        const int k = kOpposite[e][0], l = kOpposite[e][1];
+        const double c = -w[k].dot(w[l]) * inverse_norm[k] * inverse_norm[l];  // cosine of the dihedral at e
+        if (c < s.smallest_cos) {
+          s.smallest_cos = c;
+          s.largest_tet = t;
+          s.largest_edge = e;
         }
-        batch_tets[pending++].sorted = sorted_vertices(T, t);
-      }
-      for (std::size_t q = 0; q < pending; ++q) {
-        PendingTet& p = batch_tets[q];
-        for (std::size_t r = 0; r < 3; ++r) {
-          const std::size_t a = std::size_t(p.sorted[r]);
-          p.base[r] = offset[a] + fill[a].fetch_add(std::int32_t(3 - r), std::memory_order_relaxed);
+        if (c > s.largest_cos) {
+          s.largest_cos = c;
+          s.smallest_tet = t;
+          s.smallest_edge = e;
         }
-      }
-      for (std::size_t q = 0; q < pending; ++q) {
-        const PendingTet& p = batch_tets[q];
-        std::array<std::int64_t, 3> next = p.base;
-        for (std::size_t e = 6 * q; e < 6 * q + 6; ++e) {
-          const PendingEdge& edge = batch_edges[e];
-          const std::size_t r = edge.a == p.sorted[0] ? 0 : edge.a == p.sorted[1] ? 1 : 2;
-          const std::size_t slot = std::size_t(next[r]++);
-          other[slot] = edge.b;
-          value[slot] = edge.value;
-        }
+        s.obtuse += c < obtuse_cos ? 1 : 0;
+        histogram[bin_of(bin_edge_cos.data(), bins - 1, c)] += 1;
+        edge_value[to_size(t) * 6 + std::size_t(e)] = w[kEdge[e][0]].dot(w[kEdge[e][1]]) * stiffness_scale;
       }
     }
   });
@@ -359,37 +286,58 @@ QualityResult measure_quality(const TetMesh4& mesh, const QualityOptions& option
     result.obtuse_dihedral_fraction = double(result.obtuse_dihedrals) / (6.0 * double(measured_tets));
   }
 
-  // Assemble K_ij per unique edge. Group each bucket by the other vertex (sorting 64-bit keys: other vertex,
-  // then position), then sum each group in increasing value order: the summation order is fixed by the values
-  // alone. The sums go compacted to the front of the bucket.
+  // Assemble K_ij per unique edge (a, b), a < b, at row a, as cotangent_stiffness does: each row walks its
+  // vertex's usable tets in tet order, so every sum has one order whatever the thread count. The sums of a block
+  // of rows are kept (in row order) until the tolerance, which needs all of them, is known.
+  std::vector<std::int64_t> start_of(to_size(n) + 1, 0);
+  for (Eigen::Index t = 0; t < tets; ++t)
+    if (usable(t))
+      for (int k = 0; k < 4; ++k) ++start_of[to_size(T(t, k)) + 1];
+  for (Eigen::Index i = 0; i < n; ++i) start_of[to_size(i) + 1] += start_of[to_size(i)];
+  std::vector<int> incident(std::size_t(start_of.back()));
+  {
+    std::vector<std::int64_t> cursor(start_of.begin(), start_of.end() - 1);
+    for (Eigen::Index t = 0; t < tets; ++t)
+      if (usable(t))
+        for (int k = 0; k < 4; ++k) incident[std::size_t(cursor[to_size(T(t, k))]++)] = int(t);
+  }
   const Eigen::Index vertex_chunks = (n + kChunkVertices - 1) / kChunkVertices;
+  std::vector<std::vector<double>> sums(to_size(vertex_chunks));
   std::vector<ChunkEdges> edge_stats(to_size(vertex_chunks));
+  struct Scratch {
+    std::vector<int> slot;
+    std::vector<std::pair<int, double>> row;
+  };
+  tbb::enumerable_thread_specific<Scratch> scratch([&] { return Scratch{std::vector<int>(to_size(n), -1), {}}; });
   tbb::parallel_for(Eigen::Index(0), vertex_chunks, [&](Eigen::Index chunk) {
+    Scratch& w = scratch.local();
     ChunkEdges& s = edge_stats[to_size(chunk)];
-    std::vector<std::uint64_t> keys;  // allocated once per chunk, reused for each vertex
-    std::vector<double> values, run;
+    std::vector<double>& out = sums[to_size(chunk)];
     const Eigen::Index end = std::min(n, (chunk + 1) * kChunkVertices);
     for (Eigen::Index a = chunk * kChunkVertices; a < end; ++a) {
-      const std::size_t begin = std::size_t(offset[to_size(a)]), size = std::size_t(offset[to_size(a) + 1]) - begin;
-      keys.resize(size);
-      values.assign(value.begin() + std::ptrdiff_t(begin), value.begin() + std::ptrdiff_t(begin + size));
-      for (std::size_t k = 0; k < size; ++k) keys[k] = (std::uint64_t(other[begin + k]) << 32) | k;
-      std::sort(keys.begin(), keys.end());
-      std::size_t out = begin;
-      for (std::size_t k = 0; k < size;) {
-        const std::uint64_t b = keys[k] >> 32;
-        run.clear();
-        for (; k < size && keys[k] >> 32 == b; ++k) run.push_back(values[keys[k] & 0xffffffffu]);
-        std::sort(run.begin(), run.end());
-        double sum = 0.0;
-        for (double v : run) sum += v;
-        other[out] = int(b);
-        value[out] = sum;
-        ++out;
-        s.abs_sum += std::abs(sum);
+      w.row.clear();
+      for (std::int64_t q = start_of[to_size(a)]; q < start_of[to_size(a) + 1]; ++q) {
+        const int t = incident[std::size_t(q)];
+        for (int e = 0; e < 6; ++e) {
+          const int vi = T(t, kEdge[e][0]), vj = T(t, kEdge[e][1]);
+          const int b = vi == a ? vj : vj == a ? vi : -1;
+          if (b <= a) continue;  // not an edge of a, or one that row b's smaller end sums
+          const double value = edge_value[std::size_t(t) * 6 + std::size_t(e)];
+          int& slot = w.slot[std::size_t(b)];
+          if (slot < 0) {
+            slot = int(w.row.size());
+            w.row.emplace_back(b, value);
+          } else {
+            w.row[std::size_t(slot)].second += value;
+          }
+        }
       }
-      s.edges += std::int64_t(out - begin);
-      fill[to_size(a)].store(std::int32_t(out - begin), std::memory_order_relaxed);
+      for (const auto& edge : w.row) {
+        w.slot[std::size_t(edge.first)] = -1;
+        out.push_back(edge.second);
+        s.abs_sum += std::abs(edge.second);
+      }
+      s.edges += std::int64_t(w.row.size());
     }
   });
   double abs_sum = 0.0;
@@ -400,13 +348,10 @@ QualityResult measure_quality(const TetMesh4& mesh, const QualityOptions& option
   if (result.edges > 0) {
     const double tolerance = kRoundoffZeroRatio * abs_sum / double(result.edges);
     result.negative_cotangent_edges = tbb::parallel_reduce(
-        tbb::blocked_range<Eigen::Index>(0, n), std::int64_t(0),
-        [&](const tbb::blocked_range<Eigen::Index>& r, std::int64_t count) {
-          for (Eigen::Index a = r.begin(); a < r.end(); ++a) {
-            const std::size_t begin = std::size_t(offset[to_size(a)]);
-            const std::size_t stop = begin + std::size_t(fill[to_size(a)].load(std::memory_order_relaxed));
-            for (std::size_t k = begin; k < stop; ++k) count += value[k] > tolerance ? 1 : 0;
-          }
+        tbb::blocked_range<std::size_t>(0, sums.size()), std::int64_t(0),
+        [&](const tbb::blocked_range<std::size_t>& r, std::int64_t count) {
+          for (std::size_t c = r.begin(); c < r.end(); ++c)
+            for (double v : sums[c]) count += v > tolerance ? 1 : 0;
           return count;
         },
         [](std::int64_t x, std::int64_t y) { return x + y; });  // integer sum: exact in any order

@@ -20,19 +20,19 @@ struct QualityOptions {
 
 struct QualityResult {
   std::int64_t tets = 0;
-  std::int64_t degenerate_tets = 0;        ///< 3-volume <= 1e-12 * mean volume, or at rounding level for the tet's
-                                           ///< own edges (6 vol <= 1e-13 |e1| |e2| |e3|, then taken as 0): left out
-                                           ///< of every statistic below except min_volume_ratio
-  double min_dihedral_degrees = 0.0;       ///< over non-degenerate tets (0 if there are none)
-  double max_dihedral_degrees = 0.0;       ///< over non-degenerate tets (0 if there are none)
-  std::int64_t obtuse_dihedrals = 0;       ///< dihedral angles above the threshold
-  double obtuse_dihedral_fraction = 0.0;   ///< obtuse_dihedrals / (6 * non-degenerate tets)
-  std::int64_t edges = 0;                  ///< unique vertex pairs of non-degenerate tets
-  std::int64_t negative_cotangent_edges = 0;   ///< edges whose assembled off-diagonal K_ij > 1e-14 * mean |K_ij|
-  double negative_cotangent_fraction = 0.0;    ///< negative_cotangent_edges / edges. K_ij = sum over the tets of
-                                               ///< edge ij of vol grad(lambda_i) . grad(lambda_j) = -(1/6) sum l cot,
-                                               ///< so K_ij > 0 is a negative cotangent weight
-  double min_volume_ratio = 0.0;           ///< smallest tet 3-volume / mean 3-volume, degenerate tets included
+  std::int64_t degenerate_tets = 0;           ///< 3-volume <= 1e-12 * mean volume, or at rounding level for the tet's
+                                              ///< own edges (6 vol <= 1e-13 |e1| |e2| |e3|, then taken as 0): left out
+                                              ///< of every statistic below except min_volume_ratio
+  double min_dihedral_degrees = 0.0;          ///< over non-degenerate tets (0 if there are none)
+  double max_dihedral_degrees = 0.0;          ///< over non-degenerate tets (0 if there are none)
+  std::int64_t obtuse_dihedrals = 0;          ///< dihedral angles above the threshold
+  double obtuse_dihedral_fraction = 0.0;      ///< obtuse_dihedrals / (6 * non-degenerate tets)
+  std::int64_t edges = 0;                     ///< unique vertex pairs of non-degenerate tets
+  std::int64_t negative_cotangent_edges = 0;  ///< edges whose assembled off-diagonal K_ij > 1e-14 * mean |K_ij|
+  double negative_cotangent_fraction = 0.0;   ///< negative_cotangent_edges / edges. K_ij = sum over the tets of
+                                              ///< edge ij of vol grad(lambda_i) . grad(lambda_j) = -(1/6) sum l cot,
+                                              ///< so K_ij > 0 is a negative cotangent weight
+  double min_volume_ratio = 0.0;              ///< smallest tet 3-volume / mean 3-volume, degenerate tets included
   std::vector<std::int64_t> dihedral_histogram;  ///< histogram_bins counts of the non-degenerate dihedrals; bin b
                                                  ///< holds [b, b + 1) * 180 / bins degrees, 180 in the last bin
   double seconds = 0.0;
@@ -44,7 +44,8 @@ struct QualityResult {
 /// slivers (the Gram matrix E^T E squares their condition number). Angles are classified by cosine; the reported
 /// extremes are evaluated with atan2.
 /// TBB-parallel over fixed chunks with reductions in chunk order: the result is the same for any thread count.
-/// Temporary memory: 8 bytes per tet plus 12 bytes per tet edge (~80 bytes per tet) plus 12 bytes per vertex.
+/// Temporary memory: 72 bytes per tet (volume, six edge stiffnesses, four incidences) plus 8 bytes per vertex and
+/// thread, and 8 bytes per unique edge.
 /// The Laplace stage skips tets by a shape test instead (tet_frame); tests/mesh/quality_test.cpp checks on an
 /// extracted mesh that both skip the same tets and that the edge signs agree with cotangent_stiffness.
 /// Throws InvalidInput for out-of-range indices, non-finite coordinates or invalid options.
