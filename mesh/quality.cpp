@@ -17,6 +17,7 @@
 #include <sstream>
 #include <utility>
 
+#include "mesh/adjacency.h"
 #include "mesh/errors.h"
 
 namespace morphmap {
@@ -290,20 +291,9 @@ QualityResult measure_quality(const TetMesh4& mesh, const QualityOptions& option
   }
 
   // Assemble K_ij per unique edge (a, b), a < b, at row a, as cotangent_stiffness does: each row walks its
-  // vertex's usable tets in tet order, so every sum has one order whatever the thread count. The sums of a block
-  // of rows are kept (in row order) until the tolerance, which needs all of them, is known.
-  std::vector<std::int64_t> start_of(to_size(n) + 1, 0);
-  for (Eigen::Index t = 0; t < tets; ++t)
-    if (usable(t))
-      for (int k = 0; k < 4; ++k) ++start_of[to_size(T(t, k)) + 1];
-  for (Eigen::Index i = 0; i < n; ++i) start_of[to_size(i) + 1] += start_of[to_size(i)];
-  std::vector<int> incident(std::size_t(start_of.back()));
-  {
-    std::vector<std::int64_t> cursor(start_of.begin(), start_of.end() - 1);
-    for (Eigen::Index t = 0; t < tets; ++t)
-      if (usable(t))
-        for (int k = 0; k < 4; ++k) incident[std::size_t(cursor[to_size(T(t, k))]++)] = int(t);
-  }
+  // vertex's usable tets in tet order (its star, build_vertex_tets), so every sum has one order whatever the thread
+  // count. The sums of a block of rows are kept (in row order) until the tolerance, which needs all of them, is known.
+  const VertexTets adj = build_vertex_tets(T, n);
   const Eigen::Index vertex_chunks = (n + kChunkVertices - 1) / kChunkVertices;
   std::vector<std::vector<double>> sums(to_size(vertex_chunks));
   std::vector<ChunkEdges> edge_stats(to_size(vertex_chunks));
@@ -319,8 +309,9 @@ QualityResult measure_quality(const TetMesh4& mesh, const QualityOptions& option
     const Eigen::Index end = std::min(n, (chunk + 1) * kChunkVertices);
     for (Eigen::Index a = chunk * kChunkVertices; a < end; ++a) {
       w.row.clear();
-      for (std::int64_t q = start_of[to_size(a)]; q < start_of[to_size(a) + 1]; ++q) {
-        const int t = incident[std::size_t(q)];
+      for (std::int64_t q = adj.first(int(a)); q < adj.last(int(a)); ++q) {
+        const int t = adj.tet(q);
+        if (!usable(t)) continue;
         for (int e = 0; e < 6; ++e) {
           const int vi = T(t, kEdge[e][0]), vj = T(t, kEdge[e][1]);
           const int b = vi == a ? vj : vj == a ? vi : -1;
