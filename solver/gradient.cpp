@@ -11,8 +11,8 @@
 #include <chrono>
 #include <cmath>
 #include <sstream>
-#include <vector>
 
+#include "mesh/adjacency.h"
 #include "mesh/errors.h"
 #include "solver/laplace.h"
 
@@ -86,27 +86,15 @@ GradientResult compute_gradient(const TetMesh4& mesh, const Eigen::VectorXd& s) 
     result.tet_volume(t) = volume;
   });
 
-  // Vertex -> tet adjacency in CSR, filled in tet order, so each vertex sums its tets in one fixed order
-  // whatever the thread count.
-  std::vector<Eigen::Index> offset(static_cast<std::size_t>(n) + 1, 0);
-  for (Eigen::Index t = 0; t < tets; ++t) {
-    for (int k = 0; k < 4; ++k) ++offset[static_cast<std::size_t>(T(t, k)) + 1];
-  }
-  for (Eigen::Index i = 0; i < n; ++i) offset[static_cast<std::size_t>(i) + 1] += offset[static_cast<std::size_t>(i)];
-  std::vector<Eigen::Index> incident(static_cast<std::size_t>(offset.back()));
-  {
-    std::vector<Eigen::Index> cursor(offset.begin(), offset.end() - 1);
-    for (Eigen::Index t = 0; t < tets; ++t) {
-      for (int k = 0; k < 4; ++k) incident[static_cast<std::size_t>(cursor[static_cast<std::size_t>(T(t, k))]++)] = t;
-    }
-  }
+  // Each vertex sums its star in tet order (build_vertex_tets): one fixed order whatever the thread count.
+  const VertexTets adj = build_vertex_tets(T, n);
 
   result.vertex_field.setZero(n, 4);
   tbb::parallel_for(Eigen::Index(0), n, [&](Eigen::Index i) {
     Eigen::RowVector4d sum = Eigen::RowVector4d::Zero();
     double magnitude = 0.0;
-    for (Eigen::Index k = offset[static_cast<std::size_t>(i)]; k < offset[static_cast<std::size_t>(i) + 1]; ++k) {
-      const Eigen::Index t = incident[static_cast<std::size_t>(k)];
+    for (std::int64_t k = adj.first(int(i)); k < adj.last(int(i)); ++k) {
+      const Eigen::Index t = adj.tet(k);
       const double w = result.tet_volume(t);
       sum += w * result.tet_gradient.row(t);
       magnitude += w * result.tet_gradient.row(t).norm();
