@@ -13,6 +13,23 @@ void add_pipeline_options(CLI::App& cmd, PipelineOptions& o) {
       ->capture_default_str();
   cmd.add_option("--voxel-size", o.morph.voxel_size, "Explicit voxel size (overrides --voxels)")
       ->check(CLI::NonNegativeNumber);
+  cmd.add_option("--morph", o.morph_method,
+                 "Implicit morph: distance (distance-field interpolation) or vim (variational implicit, 4D r^3 "
+                 "radial basis functions through samples of both surfaces)")
+      ->check(CLI::IsMember({"distance", "vim"}))
+      ->capture_default_str();
+  cmd.add_option("--vim-samples", o.vim.samples, "vim: constraint points per surface (farthest-point samples)")
+      ->check(CLI::Range(3, 20000))
+      ->capture_default_str();
+  cmd.add_option("--vim-separation", o.vim.separation,
+                 "vim: distance between the planes of A and B in R^4, in units of the larger side of the union box")
+      ->check(CLI::PositiveNumber)
+      ->capture_default_str();
+  cmd.add_option("--vim-offset", o.vim.normal_offset,
+                 "vim: distance of the normal constraints from the surface, in units of the larger side of the union "
+                 "box")
+      ->check(CLI::PositiveNumber)
+      ->capture_default_str();
   cmd.add_option("--time-steps", o.extract.time_steps, "Lattice intervals along the morph time t")
       ->check(CLI::Range(1, 4096))
       ->capture_default_str();

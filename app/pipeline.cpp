@@ -318,6 +318,8 @@ PipelineResult run_pipeline(const PipelineOptions& options) {
   if (options.seams_mode != "all" && options.seams_mode != "topological" && options.seams_mode != "texture" &&
       options.seams_mode != "none")
     throw InvalidInput("--seams: unknown value '" + options.seams_mode + "' (choose all, topological, texture, none)");
+  if (options.morph_method != "distance" && options.morph_method != "vim")
+    throw InvalidInput("--morph: unknown value '" + options.morph_method + "' (choose distance, vim)");
   if (options.method != "trace" && options.method != "upwind" && options.method != "closest-point")
     throw InvalidInput("--method: unknown value '" + options.method + "' (choose trace, upwind, closest-point)");
   for (double t : options.slices)
@@ -340,7 +342,9 @@ PipelineResult run_pipeline(const PipelineOptions& options) {
   seconds["load"] = seconds_since(start);
   progress.stage("load", seconds["load"]);
 
-  const MorphResult morph = build_morph(A, B, options.morph);
+  const MorphResult morph = options.morph_method == "vim"
+                                ? build_vim_morph(A, B, options.morph, options.vim, options.extract.time_steps)
+                                : build_morph(A, B, options.morph);
   seconds["morph"] = morph.seconds;
   progress.stage("morph", morph.seconds);
 
@@ -652,6 +656,14 @@ PipelineResult run_pipeline(const PipelineOptions& options) {
                       {"lattice_points", morph.lattice_points},
                       {"exact_distance_queries", morph.exact_queries},
                       {"lattice_dims", {morph.field.dims.x(), morph.field.dims.y(), morph.field.dims.z()}}};
+  report["morph"] = {{"method", morph.method}, {"seconds", morph.seconds}};
+  if (morph.method == "vim")
+    report["morph"].update({{"samples", options.vim.samples},
+                            {"separation", options.vim.separation},
+                            {"normal_offset", options.vim.normal_offset},
+                            {"rbf_centres", morph.rbf_centres},
+                            {"fit_residual", morph.fit_residual},
+                            {"fit_seconds", morph.fit_seconds}});
   report["extract"] = {{"active_cells", extract.active_cells},
                        {"prisms", extract.prisms},
                        {"snapped_values", extract.snapped_values},

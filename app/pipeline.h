@@ -11,6 +11,7 @@
 #include "mesh/morph.h"
 #include "mesh/seams.h"
 #include "mesh/slice.h"
+#include "mesh/vim.h"
 #include "solver/laplace.h"
 #include "solver/trace.h"
 #include "solver/transport.h"
@@ -30,8 +31,12 @@ struct PipelineOptions {
   std::string texture;
   std::string align = "none";  ///< "none": meshes in their own coordinates; "bbox": both normalised to a unit box
   MorphOptions morph;          ///< lattice resolution
-  ExtractOptions extract;      ///< time steps, time scale
-  LaplaceOptions laplace;      ///< solver backend and tolerance
+  /// "distance": the distance-field morph (mesh/morph.h, Payne and Toga); "vim": the variational implicit morph
+  /// (mesh/vim.h, Turk and O'Brien), the paper's morph for sphere -> bunny
+  std::string morph_method = "distance";
+  VimOptions vim;          ///< samples, plane separation and normal offset of the variational implicit morph
+  ExtractOptions extract;  ///< time steps, time scale
+  LaplaceOptions laplace;  ///< solver backend and tolerance
   std::vector<std::string> compare_solvers;  ///< backends also run on the same system, reported under "compare"
                                              ///< in report.json (the map uses laplace.solver only)
   /// How B and the slices get their preimages on A: "trace" follows each vertex's characteristic of grad s back

@@ -158,7 +158,8 @@ struct Lattice {
   // The one place a lattice value is computed, so every cell sharing a lattice point sees the same float.
   float value(std::int64_t idx3, int level) const {
     const double t = double(level) / K;
-    double d = (1.0 - t) * field.dA[std::size_t(idx3)] + t * field.dB[std::size_t(idx3)];
+    double d = field.levels.empty() ? (1.0 - t) * field.dA[std::size_t(idx3)] + t * field.dB[std::size_t(idx3)]
+                                    : double(field.levels[std::size_t(level * n3 + idx3)]);
     if (std::abs(d) < snap) d = d < 0.0 ? -snap : snap;
     return float(d);
   }
@@ -238,6 +239,11 @@ ExtractResult extract_hypersurface(const MorphField& field, const ExtractOptions
   const std::int64_t n3 = std::int64_t(dims.x()) * dims.y() * dims.z();
   if (field.dA.size() != std::size_t(n3) || field.dB.size() != std::size_t(n3))
     throw InvalidInput("extract_hypersurface: field arrays do not match the lattice dimensions");
+  if (!field.levels.empty() && (field.time_levels != options.time_steps + 1 ||
+                                field.levels.size() != std::size_t(n3) * std::size_t(field.time_levels)))
+    throw InvalidInput("extract_hypersurface: the morph was sampled at " + std::to_string(field.time_levels) +
+                       " time levels, extraction with " + std::to_string(options.time_steps) + " time steps needs " +
+                       std::to_string(options.time_steps + 1));
 
   ExtractResult result;
   TetMesh4& mesh = result.mesh;
@@ -259,11 +265,16 @@ ExtractResult extract_hypersurface(const MorphField& field, const ExtractOptions
                     dims.x() - 1,
                     dims.y() - 1,
                     dims.z() - 1};
-  for (std::size_t q = 0; q < field.dA.size(); ++q)
-    result.snapped_values += (std::abs(field.dA[q]) < lat.snap) + (std::abs(field.dB[q]) < lat.snap);
+  if (field.levels.empty()) {
+    for (std::size_t q = 0; q < field.dA.size(); ++q)
+      result.snapped_values += (std::abs(field.dA[q]) < lat.snap) + (std::abs(field.dB[q]) < lat.snap);
+  } else {
+    for (const float v : field.levels) result.snapped_values += std::abs(v) < lat.snap;
+  }
 
   // Candidate cubes: d can change sign over a cube only if neither both fields are >= 0 at all its
-  // corners nor both < 0 (d is a convex combination of dA and dB). Chunks are concatenated in order.
+  // corners nor both < 0 (d is a convex combination of dA and dB); a morph sampled per level is tested at every
+  // level. Chunks are concatenated in order.
   const std::int64_t cube_count = lat.cx * lat.cy * lat.cz;
   std::vector<std::int32_t> cube_ordinal(std::size_t(cube_count), -1);
   std::vector<std::int64_t> candidates;
@@ -278,8 +289,16 @@ ExtractResult extract_hypersurface(const MorphField& field, const ExtractOptions
             bool nonneg = false, neg = false;
             for (int b = 0; b < 8; ++b) {
               const std::size_t q = std::size_t(lat.corner_index(base3, b));
-              nonneg |= field.dA[q] >= 0.0f || field.dB[q] >= 0.0f;
-              neg |= field.dA[q] < 0.0f || field.dB[q] < 0.0f;
+              if (field.levels.empty()) {
+                nonneg |= field.dA[q] >= 0.0f || field.dB[q] >= 0.0f;
+                neg |= field.dA[q] < 0.0f || field.dB[q] < 0.0f;
+              } else {
+                for (int l = 0; l < field.time_levels; ++l) {
+                  const float v = field.levels[std::size_t(l) * std::size_t(n3) + q];
+                  nonneg |= v >= 0.0f;
+                  neg |= v < 0.0f;
+                }
+              }
             }
             if (nonneg && neg) per_z[std::size_t(k)].push_back(i + lat.cx * j + slab * k);
           }

@@ -136,11 +136,7 @@ MorphField sample_morph(const SignedDistance& dA, const SignedDistance& dB, doub
   return field;
 }
 
-MorphResult build_morph(const Surface& A, const Surface& B, const MorphOptions& options) {
-  const auto start = std::chrono::steady_clock::now();
-  static std::once_flag vdb_init;
-  std::call_once(vdb_init, [] { openvdb::initialize(); });
-
+MorphField morph_lattice(const Surface& A, const Surface& B, const MorphOptions& options) {
   if (options.voxel_size <= 0.0 && options.voxels < 4)
     throw InvalidInput("build_morph: voxels must be at least 4 (got " + std::to_string(options.voxels) + ")");
   if (options.padding < 1) throw InvalidInput("build_morph: padding must be at least 1 voxel");
@@ -148,14 +144,24 @@ MorphResult build_morph(const Surface& A, const Surface& B, const MorphOptions& 
   box.extend(bounding_box(B.V));
   const double extent = box.sizes().maxCoeff();
   if (!(extent > 0.0)) throw InvalidInput("build_morph: the inputs have an empty bounding box");
-
-  MorphResult result;
-  MorphField& field = result.field;
+  MorphField field;
   field.voxel_size = options.voxel_size > 0.0 ? options.voxel_size : extent / options.voxels;
   field.extent = extent;
   const double h = field.voxel_size;
   field.origin = box.min() - options.padding * h * Eigen::Vector3d::Ones();
   for (int a = 0; a < 3; ++a) field.dims(a) = int(std::ceil(box.sizes()(a) / h - 1e-9)) + 1 + 2 * options.padding;
+  return field;
+}
+
+MorphResult build_morph(const Surface& A, const Surface& B, const MorphOptions& options) {
+  const auto start = std::chrono::steady_clock::now();
+  static std::once_flag vdb_init;
+  std::call_once(vdb_init, [] { openvdb::initialize(); });
+
+  MorphResult result;
+  result.field = morph_lattice(A, B, options);
+  MorphField& field = result.field;
+  const double h = field.voxel_size;
 
   // Index (0,0,0) of the grid sits at the lattice origin, so lattice points are voxel centres.
   auto xform = openvdb::math::Transform::createLinearTransform(h);

@@ -7,6 +7,7 @@
 #include <Eigen/Geometry>
 #include <cstdint>
 #include <functional>
+#include <string>
 #include <vector>
 
 #include "mesh/surface.h"
@@ -31,6 +32,12 @@ struct MorphField {
   Eigen::Vector3i dims = Eigen::Vector3i::Zero();  ///< lattice points along x, y, z
   std::vector<float> dA;  ///< dims.prod() values, x fastest: index = i + dims.x * (j + dims.y * k)
   std::vector<float> dB;  ///< same layout as dA
+  /// Empty for the distance-field morph, whose d(x, t) = (1 - t) dA + t dB is a function of dA and dB. A morph that
+  /// is not (the variational implicit morph, mesh/vim.h) is sampled at every time level t = l / (time_levels - 1)
+  /// instead: time_levels * dims.prod() values, level after level (index = l * dims.prod() + index(i, j, k)); dA
+  /// and dB then hold its first and last levels. Extraction needs time_levels = its time steps + 1.
+  std::vector<float> levels;
+  int time_levels = 0;
 
   std::int64_t index(int i, int j, int k) const {
     return i + std::int64_t(dims.x()) * (j + std::int64_t(dims.y()) * k);
@@ -42,8 +49,16 @@ struct MorphResult {
   MorphField field;
   double seconds = 0.0;  ///< wall time of the stage
   std::int64_t lattice_points = 0;
-  std::int64_t exact_queries = 0;  ///< closest-point queries made beyond the narrow band
+  std::int64_t exact_queries = 0;   ///< closest-point queries made beyond the narrow band
+  std::string method = "distance";  ///< "distance" (build_morph) or "vim" (build_vim_morph)
+  std::int64_t rbf_centres = 0;     ///< vim: basis functions of the 4D implicit function
+  double fit_residual = 0.0;        ///< vim: largest |G(c_i) - f_i| over the constraints, in length units
+  double fit_seconds = 0.0;         ///< vim: sampling, constraint system and its solve (the rest is evaluation)
 };
+
+/// The lattice of a morph between A and B: origin, voxel size, extent and dims as build_morph chooses them (the
+/// union bounding box plus padding), with no values. Throws InvalidInput for invalid options or an empty box.
+MorphField morph_lattice(const Surface& A, const Surface& B, const MorphOptions& options);
 
 /// Builds dA and dB on a lattice covering both (closed, manifold) surfaces plus padding.
 MorphResult build_morph(const Surface& A, const Surface& B, const MorphOptions& options);
