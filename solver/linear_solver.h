@@ -27,11 +27,15 @@ struct SolveOptions {
                                    ///< moved by at most 1e-4 (median 8e-8) of the bounding-box diagonal
   int max_iterations = 20000;      ///< cg, cg-ic give up (SolverError) after this many iterations; gauss-seidel
                                    ///< stops (without error) after this many sweeps
-  double amg_strength = 0.08;      ///< cg-amg: j joins i's aggregate only if |a_ij| >= amg_strength sqrt(a_ii a_jj)
-                                   ///< (halved on each coarser level); 0.08 coarsens ~5x per level on our morph
-                                   ///< systems. Larger values mean fewer iterations but denser levels: on cow ->
-                                   ///< horse 1.7M tets 0.05, 0.08, 0.12, 0.2 took 44, 43, 41, 36 iterations and
-                                   ///< the same time within noise
+  double amg_strength = 0.15;      ///< cg-amg: j joins i's aggregate only if |a_ij| >= amg_strength sqrt(a_ii a_jj)
+                                   ///< (halved on each coarser level). Larger values mean fewer iterations but
+                                   ///< denser levels. With cubic lattice cells (c = K h; cow -> horse 1.7M tets)
+                                   ///< 0.05, 0.08, 0.12, 0.2 took 44, 43, 41, 36 iterations and the same time within
+                                   ///< noise; with the map's default c = 2 box, whose cells are 13x longer in time
+                                   ///< than wide (strongly anisotropic), 0.08, 0.12, 0.15, 0.2 took 133, 123, 109,
+                                   ///< 111 iterations and 1.12, 1.03, 1.00, 1.07 s on cow -> horse (1.66M tets), 98,
+                                   ///< 86, 81, 80 and 1.18, 1.18, 1.14, 1.20 s on sphere -> bunny (2.4M tets; medians
+                                   ///< of 3, interleaved)
   int amg_coarsest = 400;          ///< cg-amg: levels are added until one has at most this many unknowns, which a
                                    ///< dense Cholesky factor solves exactly
   double change_threshold = 1e-5;  ///< gauss-seidel stops once the change of s in one sweep (change_measure) is
