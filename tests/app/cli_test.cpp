@@ -155,6 +155,9 @@ TEST_F(Cli, MemoryGuardRefusesBeforeAllocating) {
   expect_rejected("sphere torus --max-memory 100M", "--max-memory");
   expect_rejected("sphere torus --max-memory lots", "lots");
   expect_rejected("sphere torus --max-memory 5Q", "5Q");
+  // The variational morph's dense constraint system is refused before it is built.
+  expect_rejected("sphere torus --morph vim --vim-samples 5000 --max-memory 1G", "--vim-samples");
+  expect_rejected("sphere torus --morph spline", "--morph");
 }
 
 TEST_F(Cli, StretchReadsAMapAndRejectsBadLabels) {
