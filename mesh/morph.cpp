@@ -138,12 +138,12 @@ MorphField sample_morph(const SignedDistance& dA, const SignedDistance& dB, doub
 
 MorphField morph_lattice(const Surface& A, const Surface& B, const MorphOptions& options) {
   if (options.voxel_size <= 0.0 && options.voxels < 4)
-    throw InvalidInput("build_morph: voxels must be at least 4 (got " + std::to_string(options.voxels) + ")");
-  if (options.padding < 1) throw InvalidInput("build_morph: padding must be at least 1 voxel");
+    throw InvalidInput("morph_lattice: voxels must be at least 4 (got " + std::to_string(options.voxels) + ")");
+  if (options.padding < 1) throw InvalidInput("morph_lattice: padding must be at least 1 voxel");
   Eigen::AlignedBox3d box = bounding_box(A.V);
   box.extend(bounding_box(B.V));
   const double extent = box.sizes().maxCoeff();
-  if (!(extent > 0.0)) throw InvalidInput("build_morph: the inputs have an empty bounding box");
+  if (!(extent > 0.0)) throw InvalidInput("morph_lattice: the inputs have an empty bounding box");
   MorphField field;
   field.voxel_size = options.voxel_size > 0.0 ? options.voxel_size : extent / options.voxels;
   field.extent = extent;
