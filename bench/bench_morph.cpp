@@ -1,0 +1,41 @@
+// The morph stage alone (paper §5.1), both of the paper's morphs on sphere -> bunny_closed.obj (the sphere fitted to
+// the bunny's box, as the pipeline builds it) at 40 voxels: the distance-field morph (OpenVDB grids plus exact
+// distances) and the variational implicit morph at 600 and 1000 samples per surface, sampled at 9 time levels
+// (8 steps, the map's default). Counters: lattice points, RBF centres and the seconds of the constraint fit (the
+// rest is the lattice evaluation). Models folder: $MORPHMAP_MODELS, default ../shared/data/models.
+//   Run: morphmap_bench --benchmark_filter=BM_Morph --benchmark_repetitions=3
+#include <benchmark/benchmark.h>
+
+#include <string>
+
+#include "bench/bench_cases.h"
+#include "mesh/morph.h"
+#include "mesh/vim.h"
+
+namespace {
+
+void BM_Morph(benchmark::State& state, const std::string& method) {
+  morphmap::Surface A, B;
+  const std::string error = bench::case_surfaces("sphere-bunny", A, B);
+  if (!error.empty()) {
+    state.SkipWithError(error.c_str());
+    return;
+  }
+  morphmap::MorphOptions lattice;
+  lattice.voxels = 40;
+  morphmap::VimOptions vim;
+  vim.samples = int(state.range(0));
+  morphmap::MorphResult result;
+  for (auto _ : state) {
+    result = method == "vim" ? morphmap::build_vim_morph(A, B, lattice, vim, 8) : morphmap::build_morph(A, B, lattice);
+    benchmark::DoNotOptimize(result.field.dA.data());
+  }
+  state.counters["lattice_points"] = double(result.lattice_points);
+  state.counters["rbf_centres"] = double(result.rbf_centres);
+  state.counters["fit_seconds"] = result.fit_seconds;
+}
+
+BENCHMARK_CAPTURE(BM_Morph, distance, std::string("distance"))->Arg(0)->Unit(benchmark::kMillisecond)->UseRealTime();
+BENCHMARK_CAPTURE(BM_Morph, vim, std::string("vim"))->Arg(600)->Arg(1000)->Unit(benchmark::kMillisecond)->UseRealTime();
+
+}  // namespace
