@@ -343,12 +343,10 @@ PipelineResult run_pipeline(const PipelineOptions& options) {
   progress.stage("load", seconds["load"]);
 
   if (options.morph_method == "vim" && options.max_memory_bytes > 0) {
-    // The dense constraint matrix and its Cholesky factor: two (4 samples + 16)^2 arrays of doubles.
-    const double centres = 4.0 * options.vim.samples + 16.0;
-    const double bytes = 2.0 * centres * centres * 8.0;
+    const double bytes = vim_constraint_bytes(options.vim);
     if (bytes > double(options.max_memory_bytes))
-      throw InvalidInput("--max-memory: the variational morph's constraint system needs about " + gib(bytes) +
-                         " (" + std::to_string(options.vim.samples) + " samples per surface), over the limit of " +
+      throw InvalidInput("--max-memory: the variational morph's constraint system needs about " + gib(bytes) + " (" +
+                         std::to_string(options.vim.samples) + " samples per surface), over the limit of " +
                          gib(double(options.max_memory_bytes)) + "; lower --vim-samples");
   }
   const MorphResult morph = options.morph_method == "vim"

@@ -5,6 +5,7 @@
 #include <tbb/blocked_range.h>
 #include <tbb/enumerable_thread_specific.h>
 #include <tbb/parallel_for.h>
+#include <tbb/parallel_reduce.h>
 
 #include <Eigen/Cholesky>
 #include <Eigen/QR>
@@ -106,6 +107,12 @@ void solve_constraints(const Constraints& c, Eigen::VectorXd& w, Eigen::Matrix<d
 
 }  // namespace
 
+double vim_constraint_bytes(const VimOptions& options) {
+  // The dense kernel matrix and its Cholesky factor, for 2 centres per sample of each surface and 16 corners.
+  const double centres = 4.0 * options.samples + 16.0;
+  return 2.0 * centres * centres * double(sizeof(double));
+}
+
 std::vector<int> farthest_point_samples(const Eigen::MatrixXd& V, int count) {
   const Eigen::Index n = V.rows();
   std::vector<int> picked;
@@ -169,13 +176,18 @@ MorphResult build_vim_morph(const Surface& A, const Surface& B, const MorphOptio
   solve_constraints(c, w, poly);
   const Eigen::Index n = Eigen::Index(c.centre.size());
   result.rbf_centres = std::int64_t(n);
-  double residual = 0.0;
-  for (Eigen::Index i = 0; i < n; ++i) {
-    double g = poly(0) + poly.tail<4>().dot(c.centre[std::size_t(i)]);
-    for (Eigen::Index j = 0; j < n; ++j) g += w(j) * kernel(c.centre[std::size_t(i)], c.centre[std::size_t(j)]);
-    residual = std::max(residual, std::abs(g - c.value[std::size_t(i)]));
-  }
-  result.fit_residual = residual;
+  // In parallel like the kernel matrix it re-evaluates (a max, so exact in any order).
+  result.fit_residual = tbb::parallel_reduce(
+      tbb::blocked_range<Eigen::Index>(0, n, 64), 0.0,
+      [&](const tbb::blocked_range<Eigen::Index>& r, double worst) {
+        for (Eigen::Index i = r.begin(); i != r.end(); ++i) {
+          double g = poly(0) + poly.tail<4>().dot(c.centre[std::size_t(i)]);
+          for (Eigen::Index j = 0; j < n; ++j) g += w(j) * kernel(c.centre[std::size_t(i)], c.centre[std::size_t(j)]);
+          worst = std::max(worst, std::abs(g - c.value[std::size_t(i)]));
+        }
+        return worst;
+      },
+      [](double a, double b) { return std::max(a, b); });
   result.fit_seconds = std::chrono::duration<double>(Clock::now() - start).count();
 
   // Centres in two groups by plane (A's at tau = 0 with the A corners, B's at tau = separation), as arrays, so a

@@ -41,6 +41,10 @@ struct VimOptions {
 MorphResult build_vim_morph(const Surface& A, const Surface& B, const MorphOptions& lattice, const VimOptions& options,
                             int time_steps);
 
+/// Bytes of the constraint system build_vim_morph factorises at most (fewer when a surface has fewer vertices than
+/// samples): the pipeline's --max-memory guard checks it before the morph is built.
+double vim_constraint_bytes(const VimOptions& options);
+
 /// Indices of `count` farthest-point samples of the rows of V (#V by 3), starting at row 0; all rows when there are
 /// no more than count. Ties go to the lower index.
 std::vector<int> farthest_point_samples(const Eigen::MatrixXd& V, int count);
