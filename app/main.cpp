@@ -6,6 +6,7 @@
 #include <iostream>
 #include <sstream>
 
+#include "app/allocator.h"
 #include "app/batch.h"
 #include "app/cli_options.h"
 #include "app/pipeline.h"
@@ -15,6 +16,7 @@
 using morphmap::PipelineOptions;
 
 int main(int argc, char** argv) {
+  morphmap::tune_allocator(argc, argv);
   CLI::App app{"morphmap: dense correspondence and texture transfer through a 4D implicit morph"};
   app.require_subcommand(1);
   PipelineOptions options;
@@ -41,7 +43,9 @@ int main(int argc, char** argv) {
 
   CLI::App* batch = app.add_subcommand("batch", "Run the map jobs of a JSON manifest one after another (see README)");
   morphmap::BatchOptions batch_options;
-  batch->add_option("MANIFEST", batch_options.manifest, "JSON manifest: {\"jobs\": [{\"source\", \"target\", map options}]}")
+  batch
+      ->add_option("MANIFEST", batch_options.manifest,
+                   "JSON manifest: {\"jobs\": [{\"source\", \"target\", map options}]}")
       ->required();
   batch->add_option("-o,--output", batch_options.output_dir, "Output directory: one folder per job, summary.csv/.md")
       ->required();

@@ -151,6 +151,24 @@ TEST_F(Cli, TargetMeshGetsALabelPerVertexWithEveryMethod) {
   }
 }
 
+TEST_F(Cli, AllocatorTunablesAreSetOnceAndCanBeRefused) {
+  // The binary re-executes itself with its glibc tunables (app/allocator.h); report.json says what was in force.
+  auto tunables = [&](const std::string& env, const std::string& name) {
+    const fs::path out = dir_ / name;
+    const std::string command = "env -u GLIBC_TUNABLES -u MORPHMAP_NO_ALLOCATOR_TUNING " + env + " " + MORPHMAP_BINARY +
+                                " map sphere torus --voxels 10 --time-steps 4 -o " + out.string() + " 2>&1";
+    EXPECT_EQ(std::system(command.c_str()), 0) << command;
+    return nlohmann::json::parse(std::ifstream(out / "report.json"))["allocator"]["glibc_tunables"].get<std::string>();
+  };
+  const std::string ours = tunables("", "default");
+  EXPECT_EQ(ours.find("glibc.malloc.hugetlb=1"), 0u) << ours;
+  EXPECT_EQ(ours.find("glibc.malloc.hugetlb", 1), std::string::npos) << "appended twice: " << ours;
+  EXPECT_EQ(tunables("MORPHMAP_NO_ALLOCATOR_TUNING=1", "refused"), "");
+  // The user's own tunables are kept in front of ours; a user who sets hugetlb decides alone.
+  EXPECT_EQ(tunables("GLIBC_TUNABLES=glibc.malloc.arena_max=2", "appended"), "glibc.malloc.arena_max=2:" + ours);
+  EXPECT_EQ(tunables("GLIBC_TUNABLES=glibc.malloc.hugetlb=0", "user"), "glibc.malloc.hugetlb=0");
+}
+
 TEST_F(Cli, MemoryGuardRefusesBeforeAllocating) {
   expect_rejected("sphere torus --max-memory 100M", "--max-memory");
   expect_rejected("sphere torus --max-memory lots", "lots");
