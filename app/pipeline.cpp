@@ -371,14 +371,19 @@ PipelineResult run_pipeline(const PipelineOptions& options) {
   progress.stage("extract", extract.seconds);
   const TetMesh4& mesh = extract.mesh;
 
-  const QualityResult quality = measure_quality(mesh);
+  // The vertex stars, built once for every stage that walks them.
+  start = Clock::now();
+  const SharedStars stars = std::make_shared<const VertexTets>(build_vertex_tets(mesh.T, mesh.vertex_count()));
+  seconds["stars"] = seconds_since(start);
+
+  const QualityResult quality = measure_quality(mesh, {}, stars);
   seconds["quality"] = quality.seconds;
   progress.stage("quality", quality.seconds);
 
   const bool closest_point = options.method == "closest-point";
   LaplaceResult laplace;
   if (!closest_point) {
-    laplace = solve_harmonic(mesh, options.laplace);
+    laplace = solve_harmonic(mesh, options.laplace, stars);
     seconds["laplace"] = laplace.seconds;
     progress.stage("laplace", laplace.seconds);
   } else {
@@ -398,14 +403,14 @@ PipelineResult run_pipeline(const PipelineOptions& options) {
   TransportResult transport;
   GradientResult gradient;
   if (!closest_point) {
-    gradient = compute_gradient(mesh, laplace.s);
+    gradient = compute_gradient(mesh, laplace.s, stars);
     seconds["gradient"] = gradient.seconds;
     progress.stage("gradient", gradient.seconds);
   }
   if (options.method == "upwind") {
     transport = transport_labels(
         mesh, laplace.s, gradient.vertex_field, [&](const Eigen::Vector3d& x) { return locator.closest(x).point; },
-        options.transport);
+        options.transport, stars);
     seconds["transport"] = transport.seconds;
     progress.stage("transport", transport.seconds);
   } else {
@@ -431,7 +436,7 @@ PipelineResult run_pipeline(const PipelineOptions& options) {
   // Built once for the target and every slice.
   std::optional<CharacteristicTracer> tracer;
   if (options.method == "trace") {
-    tracer.emplace(mesh, laplace.s, gradient.vertex_field, options.trace);
+    tracer.emplace(mesh, laplace.s, gradient.vertex_field, options.trace, stars);
     traced_total.seconds += tracer->setup_seconds();
   }
   auto add_trace = [&](const TraceResult& traced) {

@@ -16,6 +16,11 @@ VertexTets build_vertex_tets(const TetIndices& T, Eigen::Index vertex_count) {
   return adj;
 }
 
+SharedStars stars_or_build(const SharedStars& given, const TetIndices& T, Eigen::Index vertex_count) {
+  if (given) return given;
+  return std::make_shared<const VertexTets>(build_vertex_tets(T, vertex_count));
+}
+
 ComponentCensus component_census(const TetMesh4& mesh) {
   const Eigen::Index n = mesh.vertex_count();
   DisjointSets sets(n);

@@ -5,6 +5,7 @@
 
 #include <algorithm>
 #include <cstdint>
+#include <memory>
 #include <numeric>
 #include <vector>
 
@@ -24,6 +25,13 @@ struct VertexTets {
 };
 
 VertexTets build_vertex_tets(const TetIndices& T, Eigen::Index vertex_count);
+
+/// The stars of a mesh, built once and shared by the stages that walk them (quality, Laplace assembly, gradient,
+/// tracing, the upwind sweep): on cow -> horse (1.7M tets) each build took 30-40 ms.
+using SharedStars = std::shared_ptr<const VertexTets>;
+
+/// `given` when it is set (it must be the stars of T), else a new build.
+SharedStars stars_or_build(const SharedStars& given, const TetIndices& T, Eigen::Index vertex_count);
 
 /// Union-find with path halving; roots are the smallest index of their set so labels are deterministic.
 class DisjointSets {

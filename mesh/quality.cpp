@@ -171,7 +171,7 @@ struct ChunkEdges {
 
 }  // namespace
 
-QualityResult measure_quality(const TetMesh4& mesh, const QualityOptions& options) {
+QualityResult measure_quality(const TetMesh4& mesh, const QualityOptions& options, const SharedStars& stars) {
   const auto start = Clock::now();
   check_input(mesh, options);
   const Points4& V = mesh.V;
@@ -293,7 +293,8 @@ QualityResult measure_quality(const TetMesh4& mesh, const QualityOptions& option
   // Assemble K_ij per unique edge (a, b), a < b, at row a, as cotangent_stiffness does: each row walks its
   // vertex's usable tets in tet order (its star, build_vertex_tets), so every sum has one order whatever the thread
   // count. The sums of a block of rows are kept (in row order) until the tolerance, which needs all of them, is known.
-  const VertexTets adj = build_vertex_tets(T, n);
+  const SharedStars shared = stars_or_build(stars, T, n);
+  const VertexTets& adj = *shared;
   const Eigen::Index vertex_chunks = (n + kChunkVertices - 1) / kChunkVertices;
   std::vector<std::vector<double>> sums(to_size(vertex_chunks));
   std::vector<ChunkEdges> edge_stats(to_size(vertex_chunks));

@@ -7,6 +7,7 @@
 #include <cstdint>
 #include <vector>
 
+#include "mesh/adjacency.h"
 #include "mesh/tet_mesh4.h"
 
 namespace morphmap {
@@ -49,6 +50,8 @@ struct QualityResult {
 /// The Laplace stage skips tets by a shape test instead (tet_frame); tests/mesh/quality_test.cpp checks on an
 /// extracted mesh that both skip the same tets and that the edge signs agree with cotangent_stiffness.
 /// Throws InvalidInput for out-of-range indices, non-finite coordinates or invalid options.
-QualityResult measure_quality(const TetMesh4& mesh, const QualityOptions& options = {});
+/// `stars`: the mesh's vertex stars when the caller has them (built here otherwise).
+QualityResult measure_quality(const TetMesh4& mesh, const QualityOptions& options = {},
+                              const SharedStars& stars = nullptr);
 
 }  // namespace morphmap

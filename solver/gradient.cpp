@@ -54,7 +54,7 @@ Eigen::Vector4d qr_gradient(const Eigen::Matrix<double, 4, 3>& E, const Eigen::V
 
 }  // namespace
 
-GradientResult compute_gradient(const TetMesh4& mesh, const Eigen::VectorXd& s) {
+GradientResult compute_gradient(const TetMesh4& mesh, const Eigen::VectorXd& s, const SharedStars& stars) {
   const auto start = std::chrono::steady_clock::now();
   const Points4& V = mesh.V;
   const TetIndices& T = mesh.T;
@@ -87,7 +87,8 @@ GradientResult compute_gradient(const TetMesh4& mesh, const Eigen::VectorXd& s) 
   });
 
   // Each vertex sums its star in tet order (build_vertex_tets): one fixed order whatever the thread count.
-  const VertexTets adj = build_vertex_tets(T, n);
+  const SharedStars shared = stars_or_build(stars, T, n);
+  const VertexTets& adj = *shared;
 
   result.vertex_field.setZero(n, 4);
   tbb::parallel_for(Eigen::Index(0), n, [&](Eigen::Index i) {

@@ -4,17 +4,20 @@
 
 #include <Eigen/Core>
 
+#include "mesh/adjacency.h"
 #include "mesh/tet_mesh4.h"
 
 namespace morphmap {
 
 struct GradientResult {
-  Eigen::MatrixXd tet_gradient;     ///< #T by 4, gradient of s in each tet (lies in the tet's hull)
-  Eigen::MatrixXd vertex_field;     ///< #V by 4, volume-weighted mean of incident tet gradients, unit length (0 where undefined)
-  Eigen::VectorXd tet_volume;       ///< #T 3-volumes
+  Eigen::MatrixXd tet_gradient;  ///< #T by 4, gradient of s in each tet (lies in the tet's hull)
+  Eigen::MatrixXd
+      vertex_field;  ///< #V by 4, volume-weighted mean of incident tet gradients, unit length (0 where undefined)
+  Eigen::VectorXd tet_volume;  ///< #T 3-volumes
   double seconds = 0.0;
 };
 
-GradientResult compute_gradient(const TetMesh4& mesh, const Eigen::VectorXd& s);
+/// `stars`: the mesh's vertex stars when the caller has them (built here otherwise).
+GradientResult compute_gradient(const TetMesh4& mesh, const Eigen::VectorXd& s, const SharedStars& stars = nullptr);
 
 }  // namespace morphmap

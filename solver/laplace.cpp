@@ -86,29 +86,13 @@ void local_stiffness(const Points4& V, const TetIndices& T,
 /// the vertex, or -1 for a fixed vertex), assembled straight into compressed storage: A (#unknowns square,
 /// both triangles) and, when b is given, b = -K_IB s with the fixed vertices' values s. Written by hand because
 /// Eigen's setFromTriplets is sequential and needs a 16-entry triplet per tet (256 bytes a tet); here every row
-/// is one task: it walks its vertex's incident tets in tet order, so each entry is summed in the same order
-/// whatever the thread count, and (i, j) and (j, i) add the same doubles in the same order.
-void assemble_rows(const TetIndices& T, const Eigen::Matrix<double, Eigen::Dynamic, 10, Eigen::RowMajor>& L,
-                   const Eigen::VectorXd& vol, const std::vector<int>& unknown, int unknowns, const Eigen::VectorXd* s,
-                   SparseMatrixD& A, Eigen::VectorXd* b) {
+/// is one task: it walks its vertex's star (tets with stiffness, in tet order), so each entry is summed in the same
+/// order whatever the thread count, and (i, j) and (j, i) add the same doubles in the same order.
+void assemble_rows(const TetIndices& T, const VertexTets& stars,
+                   const Eigen::Matrix<double, Eigen::Dynamic, 10, Eigen::RowMajor>& L, const Eigen::VectorXd& vol,
+                   const std::vector<int>& unknown, int unknowns, const Eigen::VectorXd* s, SparseMatrixD& A,
+                   Eigen::VectorXd* b) {
   const Eigen::Index n = static_cast<Eigen::Index>(unknown.size());
-  const Eigen::Index tets = T.rows();
-  // Vertex -> incident tets with stiffness (CSR), sorted by tet within each vertex.
-  std::vector<std::int64_t> start(static_cast<std::size_t>(n) + 1, 0);
-  for (Eigen::Index t = 0; t < tets; ++t) {
-    if (!(vol(t) > 0.0)) continue;
-    for (int k = 0; k < 4; ++k) ++start[static_cast<std::size_t>(T(t, k)) + 1];
-  }
-  std::partial_sum(start.begin(), start.end(), start.begin());
-  std::vector<int> incident(static_cast<std::size_t>(start.back()));
-  {
-    std::vector<std::int64_t> cursor(start.begin(), start.end() - 1);
-    for (Eigen::Index t = 0; t < tets; ++t) {
-      if (!(vol(t) > 0.0)) continue;
-      for (int k = 0; k < 4; ++k)
-        incident[static_cast<std::size_t>(cursor[static_cast<std::size_t>(T(t, k))]++)] = int(t);
-    }
-  }
   // Vertex of each unknown, in unknown order (the numbering is monotone in the vertex index).
   std::vector<int> vertex_of(static_cast<std::size_t>(unknowns));
   for (Eigen::Index v = 0; v < n; ++v)
@@ -128,8 +112,9 @@ void assemble_rows(const TetIndices& T, const Eigen::Matrix<double, Eigen::Dynam
     const int v = vertex_of[static_cast<std::size_t>(u)];
     w.row.clear();
     double rhs = 0.0;
-    for (std::int64_t q = start[static_cast<std::size_t>(v)]; q < start[static_cast<std::size_t>(v) + 1]; ++q) {
-      const int t = incident[static_cast<std::size_t>(q)];
+    for (std::int64_t q = stars.first(v); q < stars.last(v); ++q) {
+      const int t = stars.tet(q);
+      if (!(vol(t) > 0.0)) continue;  // degenerate: no stiffness
       int li = 0;
       while (T(t, li) != v) ++li;
       for (int lj = 0; lj < 4; ++lj) {
@@ -234,11 +219,11 @@ SparseMatrixD cotangent_stiffness(const Points4& V, const TetIndices& T) {
   std::vector<int> all(static_cast<std::size_t>(V.rows()));
   std::iota(all.begin(), all.end(), 0);
   SparseMatrixD K;
-  assemble_rows(T, L, vol, all, int(V.rows()), nullptr, K, nullptr);
+  assemble_rows(T, build_vertex_tets(T, V.rows()), L, vol, all, int(V.rows()), nullptr, K, nullptr);
   return K;
 }
 
-DirichletSystem dirichlet_system(const TetMesh4& mesh) {
+DirichletSystem dirichlet_system(const TetMesh4& mesh, const SharedStars& stars) {
   const Points4& V = mesh.V;
   const TetIndices& T = mesh.T;
   const Eigen::Index n = V.rows();
@@ -306,16 +291,16 @@ DirichletSystem dirichlet_system(const TetMesh4& mesh) {
     const int uj = system.unknown[static_cast<std::size_t>(j)];
     if (uj >= 0) system.x0(uj) = mesh.time_of(j);
   }
-  assemble_rows(T, L, vol, system.unknown, unknowns, &system.s, system.A, &system.b);
+  assemble_rows(T, *stars_or_build(stars, T, n), L, vol, system.unknown, unknowns, &system.s, system.A, &system.b);
   system.assemble_seconds = seconds_since(assemble_start);
   return system;
 }
 
-LaplaceResult solve_harmonic(const TetMesh4& mesh, const LaplaceOptions& options) {
+LaplaceResult solve_harmonic(const TetMesh4& mesh, const LaplaceOptions& options, const SharedStars& stars) {
   const auto start = Clock::now();
   // Before the expensive part, so a typo in the backend name fails fast.
   std::unique_ptr<LinearSolver> solver = make_solver(options.solver, options.solve);
-  DirichletSystem system = dirichlet_system(mesh);
+  DirichletSystem system = dirichlet_system(mesh, stars);
 
   LaplaceResult result;
   result.assemble_seconds = system.assemble_seconds;

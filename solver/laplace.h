@@ -7,6 +7,7 @@
 #include <string>
 #include <vector>
 
+#include "mesh/adjacency.h"
 #include "mesh/tet_mesh4.h"
 #include "solver/linear_solver.h"
 
@@ -55,9 +56,10 @@ struct DirichletSystem {
   double assemble_seconds = 0.0;  ///< local stiffness, components, A and b
 };
 
-/// Assembles the system solve_harmonic solves (it calls this), for benchmarks and external solvers.
-/// Throws InvalidInput for inconsistent mesh arrays.
-DirichletSystem dirichlet_system(const TetMesh4& mesh);
+/// Assembles the system solve_harmonic solves (it calls this), for benchmarks and external solvers. `stars`: the
+/// mesh's vertex stars when the caller has them (built here otherwise). Throws InvalidInput for inconsistent mesh
+/// arrays.
+DirichletSystem dirichlet_system(const TetMesh4& mesh, const SharedStars& stars = nullptr);
 
 struct LaplaceResult {
   Eigen::VectorXd s;                     ///< #V harmonic field, 0 on A, 1 on B
@@ -72,6 +74,6 @@ struct LaplaceResult {
 
 /// Solves the Dirichlet problem. Components with no boundary vertex would make the system singular:
 /// they are detected, excluded from the solve, and get s = their mean morph time (counted).
-LaplaceResult solve_harmonic(const TetMesh4& mesh, const LaplaceOptions& options);
+LaplaceResult solve_harmonic(const TetMesh4& mesh, const LaplaceOptions& options, const SharedStars& stars = nullptr);
 
 }  // namespace morphmap

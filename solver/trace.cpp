@@ -194,11 +194,13 @@ struct Stats {
 
 class Tracer {
  public:
-  Tracer(const TetMesh4& mesh, const Eigen::VectorXd& s, const Eigen::MatrixXd& field, const TraceOptions& options)
+  Tracer(const TetMesh4& mesh, const Eigen::VectorXd& s, const Eigen::MatrixXd& field, const TraceOptions& options,
+         const SharedStars& stars)
       : mesh_(mesh),
         s_(s),
         options_(options),
-        adj_(build_vertex_tets(mesh.T, mesh.vertex_count())),
+        stars_(stars_or_build(stars, mesh.T, mesh.vertex_count())),
+        adj_(*stars_),
         normals_(vertex_normals(mesh, adj_)),
         across_(new std::atomic<int>[std::size_t(mesh.tet_count()) * 4]) {
     for (std::size_t i = 0; i < std::size_t(mesh.tet_count()) * 4; ++i)
@@ -634,7 +636,8 @@ class Tracer {
   const Eigen::VectorXd& s_;
   const TraceOptions& options_;
   Eigen::MatrixXd field_;  // #V by 4, smoothed
-  VertexTets adj_;
+  SharedStars stars_;
+  const VertexTets& adj_;
   Eigen::MatrixXd normals_;  // #V by 4 unit vertex normals
   // #T by 4: the tet across the face opposite each tet vertex (kNone on the boundary, kMany where more than two
   // tets share the face), filled as traces cross faces.
@@ -661,8 +664,9 @@ std::vector<MeshPoint> edge_points(const Eigen::MatrixXi& edge, const Eigen::Vec
 }
 
 struct CharacteristicTracer::Impl {
-  Impl(const TetMesh4& mesh, const Eigen::VectorXd& s, const Eigen::MatrixXd& field, const TraceOptions& options)
-      : mesh(mesh), options(options), tracer(mesh, s, field, this->options) {}
+  Impl(const TetMesh4& mesh, const Eigen::VectorXd& s, const Eigen::MatrixXd& field, const TraceOptions& options,
+       const SharedStars& stars)
+      : mesh(mesh), options(options), tracer(mesh, s, field, this->options, stars) {}
   const TetMesh4& mesh;
   const TraceOptions options;  // the tracer keeps a reference to this copy
   const Tracer tracer;
@@ -687,9 +691,10 @@ const TetMesh4& checked(const TetMesh4& mesh, const Eigen::VectorXd& s, const Ei
 }  // namespace
 
 CharacteristicTracer::CharacteristicTracer(const TetMesh4& mesh, const Eigen::VectorXd& s,
-                                           const Eigen::MatrixXd& vertex_field, const TraceOptions& options) {
+                                           const Eigen::MatrixXd& vertex_field, const TraceOptions& options,
+                                           const SharedStars& stars) {
   const auto start_time = std::chrono::steady_clock::now();
-  impl_ = std::make_unique<Impl>(checked(mesh, s, vertex_field, options), s, vertex_field, options);
+  impl_ = std::make_unique<Impl>(checked(mesh, s, vertex_field, options), s, vertex_field, options, stars);
   impl_->setup_seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - start_time).count();
 }
 

@@ -19,6 +19,7 @@
 #include <memory>
 #include <vector>
 
+#include "mesh/adjacency.h"
 #include "mesh/tet_mesh4.h"
 
 namespace morphmap {
@@ -82,11 +83,12 @@ struct TraceResult {
 
 /// The tracer as a stateful object: vertex stars, vertex normals and the smoothed field are built once by the
 /// constructor (which checks the inputs and throws InvalidInput naming the problem), so the target and every slice
-/// are traced without rebuilding them. `mesh`, `s` and `vertex_field` must outlive it.
+/// are traced without rebuilding them (or the stars are the caller's, `stars`). `mesh`, `s` and `vertex_field` must
+/// outlive it.
 class CharacteristicTracer {
  public:
   CharacteristicTracer(const TetMesh4& mesh, const Eigen::VectorXd& s, const Eigen::MatrixXd& vertex_field,
-                       const TraceOptions& options = {});
+                       const TraceOptions& options = {}, const SharedStars& stars = nullptr);
   ~CharacteristicTracer();
   CharacteristicTracer(const CharacteristicTracer&) = delete;
   CharacteristicTracer& operator=(const CharacteristicTracer&) = delete;

@@ -65,8 +65,14 @@ struct UpwindFace {
 
 class Sweep {
  public:
-  Sweep(const TetMesh4& mesh, const Eigen::VectorXd& s, const Eigen::MatrixXd& field, const TransportOptions& options)
-      : mesh_(mesh), s_(s), field_(field), options_(options), adj_(build_vertex_tets(mesh.T, mesh.vertex_count())) {
+  Sweep(const TetMesh4& mesh, const Eigen::VectorXd& s, const Eigen::MatrixXd& field, const TransportOptions& options,
+        const SharedStars& stars)
+      : mesh_(mesh),
+        s_(s),
+        field_(field),
+        options_(options),
+        stars_(stars_or_build(stars, mesh.T, mesh.vertex_count())),
+        adj_(*stars_) {
     if (options.star_tangent_space) {
       tet_normal_.resize(static_cast<std::size_t>(mesh.tet_count()));
       tbb::parallel_for(tbb::blocked_range<Eigen::Index>(0, mesh.tet_count()), [&](const auto& r) {
@@ -187,7 +193,8 @@ class Sweep {
   const Eigen::VectorXd& s_;
   const Eigen::MatrixXd& field_;
   const TransportOptions& options_;
-  VertexTets adj_;
+  SharedStars stars_;
+  const VertexTets& adj_;
   std::vector<Eigen::Vector4d> tet_normal_;
 };
 
@@ -195,19 +202,19 @@ class Sweep {
 
 TransportResult transport_labels(const TetMesh4& mesh, const Eigen::VectorXd& s, const Eigen::MatrixXd& vertex_field,
                                  const std::function<Eigen::Vector3d(const Eigen::Vector3d&)>& unreached,
-                                 const TransportOptions& options) {
+                                 const TransportOptions& options, const SharedStars& stars) {
   if (mesh.V.cols() != 4) throw InvalidInput("transport_labels: mesh.V must be #V by 4");
   const Eigen::MatrixXd positions = mesh.V.leftCols(3);
   return transport_values(
       mesh, s, vertex_field, positions,
       [&](const Eigen::Vector3d& x) -> Eigen::RowVectorXd { return (unreached ? unreached(x) : x).transpose(); },
-      options);
+      options, stars);
 }
 
 TransportResult transport_values(const TetMesh4& mesh, const Eigen::VectorXd& s, const Eigen::MatrixXd& vertex_field,
                                  const Eigen::MatrixXd& source,
                                  const std::function<Eigen::RowVectorXd(const Eigen::Vector3d&)>& unreached,
-                                 const TransportOptions& options) {
+                                 const TransportOptions& options, const SharedStars& stars) {
   const auto start = std::chrono::steady_clock::now();
   const Eigen::Index nv = mesh.vertex_count();
   if (mesh.V.cols() != 4) throw InvalidInput("transport_labels: mesh.V must be #V by 4");
@@ -230,7 +237,7 @@ TransportResult transport_values(const TetMesh4& mesh, const Eigen::VectorXd& s,
     result.upwind = Eigen::MatrixXi::Constant(nv, 3, -1);
     result.wave = Eigen::VectorXi::Constant(nv, -1);
   }
-  const Sweep sweep(mesh, s, vertex_field, options);
+  const Sweep sweep(mesh, s, vertex_field, options, stars);
   auto before = [&](int a, int b) { return s(a) < s(b) || (s(a) == s(b) && a < b); };
 
   // 1. Every vertex's exact upwind face, independent of any order (parallel).
