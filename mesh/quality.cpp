@@ -102,16 +102,12 @@ Eigen::Matrix3d hull_coordinates(const Points4& V, const TetIndices& T, Eigen::I
 /// Signed 6 * volume of a tet from its hull coordinates.
 double hull_determinant(const Eigen::Matrix3d& R) { return R(0, 0) * R(1, 1) * R(2, 2); }
 
-/// 3-volume, or 0 where it is rounding noise (or overflowed): such a tet has nothing to measure. From the
-/// generalised cross product, whose 3x3 minors carry the same absolute error as the QR determinant (a few ulps of
-/// |e1| |e2| |e3|) at a fraction of the cost; only the tets that pass are factorised.
-double measurable_volume(const Points4& V, const TetIndices& T, Eigen::Index t) {
-  const Eigen::Vector4d v0 = V.row(T(t, 0)).transpose();
-  const Eigen::Vector4d a = V.row(T(t, 1)).transpose() - v0;
-  const Eigen::Vector4d b = V.row(T(t, 2)).transpose() - v0;
-  const Eigen::Vector4d c = V.row(T(t, 3)).transpose() - v0;
-  const double det = cross4(a, b, c).norm();
-  const double hadamard = std::sqrt(a.squaredNorm() * b.squaredNorm() * c.squaredNorm());
+/// 3-volume from the hull coordinates, or 0 where it is rounding noise (or overflowed): such a tet has nothing to
+/// measure. R(k, k) carries an absolute error of a few ulps of the edge lengths, so the product's error is a few ulps
+/// of |e1| |e2| |e3| (its Hadamard bound), read off R's columns.
+double measurable_volume(const Eigen::Matrix3d& R) {
+  const double det = std::abs(hull_determinant(R));
+  const double hadamard = R.col(0).norm() * R.col(1).norm() * R.col(2).norm();
   return det > kRoundoffVolumeRatio * hadamard && std::isfinite(det) ? det / 6.0 : 0.0;
 }
 
@@ -141,6 +137,7 @@ void scaled_gradients(const Eigen::Matrix3d& R, Eigen::Vector3d w[4]) {
 
 struct ChunkStats {
   double min_volume = std::numeric_limits<double>::infinity();
+  double min_positive_volume = std::numeric_limits<double>::infinity();
   double volume_sum = 0.0;
 };
 
@@ -188,30 +185,12 @@ QualityResult measure_quality(const TetMesh4& mesh, const QualityOptions& option
     return result;
   }
 
-  // Volumes first: the degenerate threshold needs the mean over the whole mesh.
+  // One pass over the tets: hull coordinates, volume, angles, histogram and the six edge stiffnesses of every tet whose
+  // volume is not rounding noise. Degenerate also means 3-volume <= kDegenerateVolumeRatio * the mean, which is known
+  // only after the pass: the chunks holding such a tet (none on the Table II morphs) are measured again without it.
   const Eigen::Index tet_chunks = (tets + kChunkTets - 1) / kChunkTets;
   std::vector<double> volume(to_size(tets));
   std::vector<ChunkStats> volume_stats(to_size(tet_chunks));
-  tbb::parallel_for(Eigen::Index(0), tet_chunks, [&](Eigen::Index chunk) {
-    ChunkStats& s = volume_stats[to_size(chunk)];
-    const Eigen::Index end = std::min(tets, (chunk + 1) * kChunkTets);
-    for (Eigen::Index t = chunk * kChunkTets; t < end; ++t) {
-      const double vol = measurable_volume(V, T, t);
-      volume[to_size(t)] = vol;
-      s.min_volume = std::min(s.min_volume, vol);
-      s.volume_sum += vol;
-    }
-  });
-  double volume_sum = 0.0, min_volume = std::numeric_limits<double>::infinity();
-  for (const ChunkStats& s : volume_stats) {
-    volume_sum += s.volume_sum;
-    min_volume = std::min(min_volume, s.min_volume);
-  }
-  const double mean_volume = volume_sum / double(tets);
-  result.min_volume_ratio = mean_volume > 0.0 ? min_volume / mean_volume : 0.0;
-  const double degenerate_volume = kDegenerateVolumeRatio * mean_volume;
-  // Strict: in an all-flat mesh (bound 0) every tet is degenerate, so nothing below divides by a zero volume.
-  auto usable = [&](Eigen::Index t) { return volume[to_size(t)] > degenerate_volume; };
 
   // Each tet's six edge stiffnesses vol * grad(lambda_i) . grad(lambda_j), in kEdge order, written in tet order
   // by the angle pass and summed per edge below.
@@ -219,9 +198,8 @@ QualityResult measure_quality(const TetMesh4& mesh, const QualityOptions& option
   // bytes a tet, 80 MB on cow -> horse) would buy nothing.
   const std::unique_ptr<double[]> edge_value(new double[to_size(tets) * 6]);
 
-  // Angles, histogram and the per-tet stiffness. Angles are classified by cosine against precomputed bin
-  // edges, which saves six atan2 per tet; near the classification boundaries (well inside (0, 180)) the cosine
-  // is as accurate as the angle.
+  // Angles are classified by cosine against precomputed bin edges, which saves six atan2 per tet; near the
+  // classification boundaries (well inside (0, 180)) the cosine is as accurate as the angle.
   std::vector<double> bin_edge_cos(std::size_t(bins - 1));  // cos of the upper edge of bins 0 .. bins-2, decreasing
   for (int b = 1; b < bins; ++b) bin_edge_cos[std::size_t(b - 1)] = std::cos(kPi * b / bins);
   const double obtuse_above = options.obtuse_threshold_degrees + kAngleSlackDegrees;
@@ -229,14 +207,18 @@ QualityResult measure_quality(const TetMesh4& mesh, const QualityOptions& option
       obtuse_above >= 180.0 ? -std::numeric_limits<double>::infinity() : std::cos(obtuse_above * (kPi / 180.0));
   std::vector<ChunkAngles> angle_stats(to_size(tet_chunks));
   std::vector<std::int64_t> chunk_histogram(to_size(tet_chunks) * std::size_t(bins), 0);
-  tbb::parallel_for(Eigen::Index(0), tet_chunks, [&](Eigen::Index chunk) {
+  // Measures chunk `chunk` (its angle statistics from scratch) over the tets with volume above `floor`.
+  auto measure_chunk = [&](Eigen::Index chunk, double floor) {
     ChunkAngles& s = angle_stats[to_size(chunk)];
+    s = ChunkAngles{};
     std::int64_t* histogram = chunk_histogram.data() + to_size(chunk) * std::size_t(bins);
+    std::fill(histogram, histogram + bins, std::int64_t(0));
     const Eigen::Index end = std::min(tets, (chunk + 1) * kChunkTets);
     Eigen::Vector3d w[4];
     for (Eigen::Index t = chunk * kChunkTets; t < end; ++t) {
-      if (!usable(t)) continue;
       const Eigen::Matrix3d R = hull_coordinates(V, T, t);
+      volume[to_size(t)] = measurable_volume(R);
+      if (!(volume[to_size(t)] > floor)) continue;
       scaled_gradients(R, w);
       ++s.measured_tets;
       const double inverse_norm[4] = {1.0 / w[0].norm(), 1.0 / w[1].norm(), 1.0 / w[2].norm(), 1.0 / w[3].norm()};
@@ -260,7 +242,30 @@ QualityResult measure_quality(const TetMesh4& mesh, const QualityOptions& option
         edge_value[to_size(t) * 6 + std::size_t(e)] = w[kEdge[e][0]].dot(w[kEdge[e][1]]) * stiffness_scale;
       }
     }
-  });
+    ChunkStats& v = volume_stats[to_size(chunk)];
+    v = ChunkStats{};
+    for (Eigen::Index t = chunk * kChunkTets; t < end; ++t) {
+      const double vol = volume[to_size(t)];
+      v.min_volume = std::min(v.min_volume, vol);
+      v.volume_sum += vol;
+      if (vol > 0.0) v.min_positive_volume = std::min(v.min_positive_volume, vol);
+    }
+  };
+  tbb::parallel_for(Eigen::Index(0), tet_chunks, [&](Eigen::Index chunk) { measure_chunk(chunk, 0.0); });
+  double volume_sum = 0.0, min_volume = std::numeric_limits<double>::infinity();
+  for (const ChunkStats& s : volume_stats) {
+    volume_sum += s.volume_sum;
+    min_volume = std::min(min_volume, s.min_volume);
+  }
+  const double mean_volume = volume_sum / double(tets);
+  result.min_volume_ratio = mean_volume > 0.0 ? min_volume / mean_volume : 0.0;
+  const double degenerate_volume = kDegenerateVolumeRatio * mean_volume;
+  // The volumes do not change when a chunk is measured again, so neither does the mean.
+  for (Eigen::Index chunk = 0; chunk < tet_chunks; ++chunk)
+    if (!(volume_stats[to_size(chunk)].min_positive_volume > degenerate_volume))
+      measure_chunk(chunk, degenerate_volume);
+  // Strict: in an all-flat mesh (bound 0) every tet is degenerate, so nothing below divides by a zero volume.
+  auto usable = [&](Eigen::Index t) { return volume[to_size(t)] > degenerate_volume; };
 
   // Chunk order and strict comparisons: the first extreme in tet order wins, for any thread count.
   std::int64_t measured_tets = 0;
