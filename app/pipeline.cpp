@@ -49,6 +49,10 @@ Frame normalise(Surface& surface) {
   frame.center = box.center();
   frame.scale = 0.5 * box.sizes().maxCoeff();
   surface.V = (surface.V.rowwise() - frame.center.transpose()) / frame.scale;
+  if (surface.signed_distance)
+    surface.signed_distance = [world = surface.signed_distance, frame](const Eigen::Vector3d& x) {
+      return world(x * frame.scale + frame.center) / frame.scale;
+    };
   return frame;
 }
 

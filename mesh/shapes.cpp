@@ -240,12 +240,19 @@ Surface make_shape(const ShapeSpec& spec, const std::optional<Eigen::AlignedBox3
   std::vector<Eigen::Vector2d> uvs;
   std::vector<Eigen::Vector3i> face_uvs;
   const bool textured = spec.kind == "sphere" && spec.texture;
+  std::function<double(const Eigen::Vector3d&)> distance;
   if (spec.kind == "sphere") {
     append_sphere(center, size, spec.resolution, textured, positions, faces, uvs, face_uvs);
+    distance = [center, size](const Eigen::Vector3d& x) { return (x - center).norm() - size; };
   } else if (spec.kind == "torus") {
     // Half of the largest extent is R + r = R (1 + r_ratio), across the hole.
     const double major = size / (1.0 + spec.r_ratio);
-    append_torus(center, major, spec.r_ratio * major, spec.resolution, positions, faces);
+    const double minor = spec.r_ratio * major;
+    append_torus(center, major, minor, spec.resolution, positions, faces);
+    distance = [center, major, minor](const Eigen::Vector3d& x) {
+      const Eigen::Vector3d p = x - center;
+      return std::hypot(std::hypot(p.x(), p.y()) - major, p.z()) - minor;
+    };
   } else {
     // Along x the pair spans 2 (2 rs + gap / 2) with gap = gap_ratio rs.
     const double radius = size / (2.0 + 0.5 * spec.gap_ratio);
@@ -254,10 +261,15 @@ Surface make_shape(const ShapeSpec& spec, const std::optional<Eigen::AlignedBox3
     std::vector<Eigen::Vector3i> no_face_uvs;
     append_sphere(center - offset, radius, spec.resolution, false, positions, faces, no_uvs, no_face_uvs);
     append_sphere(center + offset, radius, spec.resolution, false, positions, faces, no_uvs, no_face_uvs);
+    // The spheres are disjoint, so the nearer one's distance is the union's, inside and out.
+    distance = [center, offset, radius](const Eigen::Vector3d& x) {
+      return std::min((x - center + offset).norm(), (x - center - offset).norm()) - radius;
+    };
   }
 
   Surface surface;
   surface.name = name;
+  surface.signed_distance = distance;
   surface.V.resize(static_cast<Eigen::Index>(positions.size()), 3);
   for (std::size_t i = 0; i < positions.size(); ++i) surface.V.row(static_cast<Eigen::Index>(i)) = positions[i];
   surface.F.resize(static_cast<Eigen::Index>(faces.size()), 3);

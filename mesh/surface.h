@@ -5,6 +5,7 @@
 #include <Eigen/Core>
 #include <Eigen/Geometry>
 #include <cstdint>
+#include <functional>
 #include <memory>
 #include <string>
 #include <vector>
@@ -21,13 +22,16 @@ struct RgbImage {
 /// A triangle surface with optional per-corner texture coordinates.
 /// Faces are counter-clockwise seen from outside (outward normals).
 struct Surface {
-  Eigen::MatrixXd V;   ///< #V by 3 vertex positions
-  Eigen::MatrixXi F;   ///< #F by 3 vertex indices per triangle
-  Eigen::MatrixXd UV;  ///< #UV by 2 texture coordinates; empty when the surface has none
-  Eigen::MatrixXi FUV; ///< #F by 3 indices into UV per triangle corner; empty when UV is empty
-  std::string texture_path;                    ///< image file named by the MTL (map_Kd), empty if none
-  std::shared_ptr<const RgbImage> texture;     ///< in-memory texture (built-in shapes), null if none
-  std::string name;                            ///< file path or built-in spec, used in messages
+  Eigen::MatrixXd V;                        ///< #V by 3 vertex positions
+  Eigen::MatrixXi F;                        ///< #F by 3 vertex indices per triangle
+  Eigen::MatrixXd UV;                       ///< #UV by 2 texture coordinates; empty when the surface has none
+  Eigen::MatrixXi FUV;                      ///< #F by 3 indices into UV per triangle corner; empty when UV is empty
+  std::string texture_path;                 ///< image file named by the MTL (map_Kd), empty if none
+  std::shared_ptr<const RgbImage> texture;  ///< in-memory texture (built-in shapes), null if none
+  std::string name;                         ///< file path or built-in spec, used in messages
+  /// Built-in analytic shapes: the exact signed distance (negative inside) of the shape the triangles approximate
+  /// (their vertices lie on it). The distance-field morph samples it instead of the mesh's distance. Empty for meshes.
+  std::function<double(const Eigen::Vector3d&)> signed_distance;
 
   bool has_uv() const { return UV.rows() > 0 && FUV.rows() == F.rows(); }
   bool has_texture() const { return texture != nullptr || !texture_path.empty(); }

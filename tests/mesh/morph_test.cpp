@@ -1,0 +1,75 @@
+// The distance-field morph's lattice values (mesh/morph.h): analytic shapes sampled exactly everywhere, meshes
+// exact where the morph can change sign and of the right sign everywhere.
+#include "mesh/morph.h"
+
+#include <gtest/gtest.h>
+
+#include <cmath>
+#include <optional>
+
+#include "mesh/shapes.h"
+#include "mesh/transfer.h"
+
+namespace morphmap {
+namespace {
+
+Surface shape(const std::string& spec, const std::optional<Eigen::AlignedBox3d>& fit = std::nullopt) {
+  return make_shape(parse_shape_spec(spec), fit);
+}
+
+TEST(DistanceMorph, AnalyticShapesAreSampledExactlyAndMeshesWhereTheMorphCanCross) {
+  const Surface A = shape("sphere:size=0.6,center=0/0/0");
+  Surface B = shape("torus:size=1,center=0.1/0/0");
+  const auto torus = B.signed_distance;
+  ASSERT_TRUE(A.signed_distance && torus);
+  B.signed_distance = nullptr;  // B as a plain mesh: voxelised and queried
+  MorphOptions options;
+  options.voxels = 24;
+  const MorphResult morph = build_morph(A, B, options);
+  const MorphField& f = morph.field;
+  EXPECT_GT(morph.exact_queries, 0);
+  // Tessellation error of the torus mesh (vertices on the surface, faces inside): well below a voxel.
+  const double sagitta = 0.05 * f.voxel_size;
+  const SurfaceLocator mesh_b(B);
+  int crossing_points = 0;
+  for (int k = 0; k < f.dims.z(); ++k)
+    for (int j = 0; j < f.dims.y(); ++j)
+      for (int i = 0; i < f.dims.x(); ++i) {
+        const Eigen::Vector3d x = f.point(i, j, k);
+        const std::size_t q = std::size_t(f.index(i, j, k));
+        EXPECT_NEAR(f.dA[q], A.signed_distance(x), 1e-6) << x.transpose();
+        const double exact = torus(x);
+        if (std::abs(exact) > sagitta) {
+          EXPECT_EQ(f.dB[q] < 0.0f, exact < 0.0) << x.transpose();
+        }
+        // Where the morph can change sign (dA and dB of opposite signs), dB is the mesh's own distance.
+        if ((f.dA[q] < 0.0f) != (f.dB[q] < 0.0f)) {
+          ++crossing_points;
+          EXPECT_NEAR(std::abs(f.dB[q]), mesh_b.closest(x).distance, 1e-5) << x.transpose();
+        }
+      }
+  EXPECT_GT(crossing_points, 100);
+}
+
+TEST(DistanceMorph, TwoAnalyticShapesNeedNoQueries) {
+  const Surface A = shape("sphere:size=0.5,center=0/0/0");
+  const Surface B = shape("two-spheres:size=1,center=0/0/0");
+  MorphOptions options;
+  options.voxels = 16;
+  const MorphResult morph = build_morph(A, B, options);
+  EXPECT_EQ(morph.exact_queries, 0);
+  const MorphField& f = morph.field;
+  for (int k = 0; k < f.dims.z(); k += 3)
+    for (int j = 0; j < f.dims.y(); j += 3)
+      for (int i = 0; i < f.dims.x(); i += 3) {
+        const Eigen::Vector3d x = f.point(i, j, k);
+        EXPECT_NEAR(f.dB[std::size_t(f.index(i, j, k))], B.signed_distance(x), 1e-6);
+      }
+  // The union's distance: inside either sphere negative, zero on both surfaces.
+  EXPECT_LT(B.signed_distance(Eigen::Vector3d(B.V.col(0).minCoeff() + 0.1, 0, 0)), 0.0);
+  EXPECT_NEAR(B.signed_distance(B.V.row(0).transpose()), 0.0, 1e-12);
+  EXPECT_NEAR(B.signed_distance(B.V.row(B.V.rows() - 1).transpose()), 0.0, 1e-12);
+}
+
+}  // namespace
+}  // namespace morphmap
