@@ -1,16 +1,18 @@
-// Texture transfer (paper §8.2): labels are points of A; their closest point on A's original mesh
-// (CGAL AABB tree, kept in this file only because it is slow to compile) gives a face and barycentric
-// weights that interpolate the corner UVs.
+// Texture transfer (paper §8.2): labels are points of A; their closest point on A's original mesh gives a face and
+// barycentric weights that interpolate the corner UVs. Closest points come from Embree point queries (rtcPointQuery)
+// over a single-precision BVH of the faces that only prunes; every face it offers is measured exactly in double
+// precision (Ericson, Real-Time Collision Detection §5.1.5), and the query radius keeps a margin over Embree's
+// rounding so that no face that could win, or tie, is pruned.
 #include "mesh/transfer.h"
 
-#include <CGAL/AABB_traits.h>
-#include <CGAL/AABB_tree.h>
-#include <CGAL/AABB_triangle_primitive.h>
-#include <CGAL/Simple_cartesian.h>
+#include <embree3/rtcore.h>
 #include <tbb/blocked_range.h>
 #include <tbb/parallel_for.h>
 
 #include <algorithm>
+#include <cfloat>
+#include <cmath>
+#include <limits>
 #include <string>
 
 #include "mesh/errors.h"
@@ -18,13 +20,6 @@
 namespace morphmap {
 
 namespace {
-
-using Kernel = CGAL::Simple_cartesian<double>;
-using Triangle3 = Kernel::Triangle_3;
-using Point3 = Kernel::Point_3;
-using TriangleIterator = std::vector<Triangle3>::const_iterator;
-using Primitive = CGAL::AABB_triangle_primitive<Kernel, TriangleIterator>;
-using Tree = CGAL::AABB_tree<CGAL::AABB_traits<Kernel, Primitive>>;
 
 // Weights of q (already on the triangle) in (a, b, c). A degenerate triangle is a segment or a point:
 // project on its longest edge, which spans it, instead of inverting a singular Gram matrix.
@@ -74,13 +69,159 @@ Eigen::Vector3d barycentric_of(const Eigen::Vector3d& q, const Eigen::Vector3d& 
   return w;
 }
 
+Eigen::Vector3d closest_on_segment(const Eigen::Vector3d& p, const Eigen::Vector3d& a, const Eigen::Vector3d& b) {
+  const Eigen::Vector3d ab = b - a;
+  const double length = ab.squaredNorm();
+  if (!(length > 0.0)) return a;
+  return a + std::clamp((p - a).dot(ab) / length, 0.0, 1.0) * ab;
+}
+
+// Ericson's Voronoi-region test. Its vertex tests are exact for any triangle and each edge branch returns the foot
+// on that edge, so only its divisions need guards: a repeated vertex makes an edge's denominator zero, and a
+// collinear (zero-area) triangle leaves the face branch with a zero or rounding-signed denominator; such a triangle
+// is the union of its edges.
+Eigen::Vector3d closest_on_triangle(const Eigen::Vector3d& p, const Eigen::Vector3d& a, const Eigen::Vector3d& b,
+                                    const Eigen::Vector3d& c) {
+  const Eigen::Vector3d ab = b - a, ac = c - a, ap = p - a;
+  const double d1 = ab.dot(ap), d2 = ac.dot(ap);
+  if (d1 <= 0.0 && d2 <= 0.0) return a;
+  const Eigen::Vector3d bp = p - b;
+  const double d3 = ab.dot(bp), d4 = ac.dot(bp);
+  if (d3 >= 0.0 && d4 <= d3) return b;
+  const double vc = d1 * d4 - d3 * d2;
+  if (vc <= 0.0 && d1 >= 0.0 && d3 <= 0.0) return d1 - d3 > 0.0 ? Eigen::Vector3d(a + d1 / (d1 - d3) * ab) : a;
+  const Eigen::Vector3d cp = p - c;
+  const double d5 = ab.dot(cp), d6 = ac.dot(cp);
+  if (d6 >= 0.0 && d5 <= d6) return c;
+  const double vb = d5 * d2 - d1 * d6;
+  if (vb <= 0.0 && d2 >= 0.0 && d6 <= 0.0) return d2 - d6 > 0.0 ? Eigen::Vector3d(a + d2 / (d2 - d6) * ac) : a;
+  const double va = d3 * d6 - d5 * d4;
+  const double e = d4 - d3, f = d5 - d6;
+  if (va <= 0.0 && e >= 0.0 && f >= 0.0) return e + f > 0.0 ? Eigen::Vector3d(b + e / (e + f) * (c - b)) : b;
+  const double denom = va + vb + vc;
+  if (denom > 0.0 && std::isfinite(1.0 / denom)) {
+    const Eigen::Vector3d inside = a + ab * (vb / denom) + ac * (vc / denom);
+    if (inside.allFinite()) return inside;
+  }
+  Eigen::Vector3d best = closest_on_segment(p, a, b);
+  for (const Eigen::Vector3d& x : {closest_on_segment(p, b, c), closest_on_segment(p, c, a)})
+    if ((x - p).squaredNorm() < (best - p).squaredNorm()) best = x;
+  return best;
+}
+
+// The least float not below x: a query radius that never undercuts the distance it stands for.
+float float_above(double x) {
+  if (!(x < double(FLT_MAX))) return std::numeric_limits<float>::infinity();
+  float f = float(x);
+  if (double(f) < x) f = std::nextafter(f, std::numeric_limits<float>::infinity());
+  return f;
+}
+
+// Embree reports errors through a callback on the thread whose call failed; the call's caller then throws. The code
+// is a plain thread_local so that the check after every query costs one load.
+thread_local RTCError embree_error = RTC_ERROR_NONE;
+thread_local std::string embree_message;
+
+void record_embree_error(void*, RTCError code, const char* message) {
+  if (embree_error != RTC_ERROR_NONE) return;  // keep the first: later ones usually follow from it
+  embree_error = code;
+  embree_message = message != nullptr ? message : "";
+}
+
+const char* error_name(RTCError code) {
+  switch (code) {
+    case RTC_ERROR_NONE:
+      return "no error";
+    case RTC_ERROR_INVALID_ARGUMENT:
+      return "invalid argument";
+    case RTC_ERROR_INVALID_OPERATION:
+      return "invalid operation";
+    case RTC_ERROR_OUT_OF_MEMORY:
+      return "out of memory";
+    case RTC_ERROR_UNSUPPORTED_CPU:
+      return "unsupported CPU";
+    case RTC_ERROR_CANCELLED:
+      return "cancelled";
+    default:
+      return "unknown error";
+  }
+}
+
+void throw_if_embree_failed(const std::string& function, RTCDevice device) {
+  RTCError code = embree_error;
+  std::string message = embree_message;
+  embree_error = RTC_ERROR_NONE;
+  embree_message.clear();
+  // The device keeps its own sticky code too (also set before the callback exists, by rtcNewDevice).
+  const RTCError sticky = rtcGetDeviceError(device);
+  if (code == RTC_ERROR_NONE) code = sticky;
+  if (code == RTC_ERROR_NONE) return;
+  throw Error(function + " failed: Embree " + error_name(code) + (message.empty() ? "" : ": " + message));
+}
+
+struct Corners {
+  Eigen::Vector3d p[3];
+};
+
+// Embree drops a triangle with a vertex coordinate beyond FLT_LARGE (1.8e18) and squares node distances in float:
+// past this reach (from the mesh's box centre) the faces, or a query, are scanned instead.
+constexpr double kFloatReach = 1e17;
+
+// The best face so far by (squared distance, face index): a lexicographic minimum, so the answer is the same
+// whatever order the BVH (built in parallel) offers the faces in.
+struct Search {
+  const std::vector<Corners>* faces = nullptr;
+  Eigen::Vector3d query = Eigen::Vector3d::Zero();
+  double slack = 0.0;  ///< absolute error of Embree's node distances from rounding the query and vertices to float
+  double best_d2 = std::numeric_limits<double>::infinity();
+  int best_face = -1;
+  Eigen::Vector3d best_point = Eigen::Vector3d::Zero();
+
+  bool visit(unsigned face) {
+    const Corners& t = (*faces)[face];
+    const Eigen::Vector3d x = closest_on_triangle(query, t.p[0], t.p[1], t.p[2]);
+    const double d2 = (x - query).squaredNorm();
+    if (d2 < best_d2 || (d2 == best_d2 && int(face) < best_face)) {
+      best_d2 = d2;
+      best_face = int(face);
+      best_point = x;
+      return true;
+    }
+    return false;
+  }
+
+  // Above the best distance by more than Embree's rounding (relative 1e-6 covers its float squares and sums, slack
+  // the rounded query and vertices), so a node at exactly the best distance, which may hold a tie, is still visited.
+  float radius() const { return float_above((std::sqrt(best_d2) + slack) * (1.0 + 1e-6)); }
+};
+
+bool visit_face(RTCPointQueryFunctionArguments* args) {
+  auto* search = static_cast<Search*>(args->userPtr);
+  if (!search->visit(args->primID)) return false;
+  const float r = search->radius();
+  if (!(r < args->query->radius)) return false;
+  args->query->radius = r;
+  return true;
+}
+
 }  // namespace
 
 struct SurfaceLocator::Impl {
-  Eigen::MatrixXd V;
-  Eigen::MatrixXi F;
-  std::vector<Triangle3> triangles;
-  Tree tree;
+  std::vector<Corners> faces;
+  Eigen::Vector3d shift = Eigen::Vector3d::Zero();  ///< box centre: Embree's float frame, precise near the mesh
+  double extent = 0.0;                              ///< largest |coordinate| of a vertex in that frame
+  // One device per locator: it takes 0.2 ms to create, and a shared static one would be released during static
+  // destruction, in no defined order with TBB's.
+  RTCDevice device = nullptr;
+  RTCScene scene = nullptr;
+
+  Impl() = default;
+  Impl(const Impl&) = delete;
+  Impl& operator=(const Impl&) = delete;
+  ~Impl() {
+    if (scene != nullptr) rtcReleaseScene(scene);
+    if (device != nullptr) rtcReleaseDevice(device);
+  }
 };
 
 SurfaceLocator::SurfaceLocator(const Surface& surface) : impl_(std::make_unique<Impl>()) {
@@ -90,37 +231,85 @@ SurfaceLocator::SurfaceLocator(const Surface& surface) : impl_(std::make_unique<
   if (surface.F.minCoeff() < 0 || surface.F.maxCoeff() >= surface.V.rows())
     throw InvalidInput(name + ": face index out of range");
   if (!surface.V.allFinite()) throw InvalidInput(name + ": non-finite vertex");
-  impl_->V = surface.V;
-  impl_->F = surface.F;
-  impl_->triangles.reserve(std::size_t(surface.F.rows()));
-  for (Eigen::Index f = 0; f < surface.F.rows(); ++f) {
-    Point3 p[3];
-    for (int k = 0; k < 3; ++k) {
-      const auto v = surface.F(f, k);
-      p[k] = Point3(surface.V(v, 0), surface.V(v, 1), surface.V(v, 2));
-    }
-    impl_->triangles.emplace_back(p[0], p[1], p[2]);
+  Impl& m = *impl_;
+  m.faces.resize(std::size_t(surface.F.rows()));
+  tbb::parallel_for(tbb::blocked_range<Eigen::Index>(0, surface.F.rows(), 4096),
+                    [&](const tbb::blocked_range<Eigen::Index>& r) {
+                      for (Eigen::Index f = r.begin(); f != r.end(); ++f)
+                        for (int k = 0; k < 3; ++k)
+                          m.faces[std::size_t(f)].p[k] = surface.V.row(surface.F(f, k)).transpose();
+                    });
+  const Eigen::AlignedBox3d box = bounding_box(surface.V);
+  m.shift = box.center();
+  m.extent = (box.max() - m.shift).cwiseMax(m.shift - box.min()).maxCoeff();
+  if (!(m.extent < kFloatReach)) return;  // closest() scans
+
+  m.device = rtcNewDevice(nullptr);
+  if (m.device == nullptr) throw_if_embree_failed(name + ": rtcNewDevice", nullptr);
+  rtcSetDeviceErrorFunction(m.device, record_embree_error, nullptr);
+  m.scene = rtcNewScene(m.device);
+  throw_if_embree_failed(name + ": rtcNewScene", m.device);
+  // MEDIUM builds in two thirds of the time of a user geometry and a fifth of HIGH (spatial splits), with the same
+  // query speed (bench/bench_locator.cpp); the hits do not depend on the tree. Embree keeps zero-area triangles (it
+  // drops only out-of-range indices and non-finite or huge vertices), which the tests check.
+  rtcSetSceneBuildQuality(m.scene, RTC_BUILD_QUALITY_MEDIUM);
+  RTCGeometry geometry = rtcNewGeometry(m.device, RTC_GEOMETRY_TYPE_TRIANGLE);
+  throw_if_embree_failed(name + ": rtcNewGeometry", m.device);
+  auto* vertices = static_cast<float*>(rtcSetNewGeometryBuffer(geometry, RTC_BUFFER_TYPE_VERTEX, 0, RTC_FORMAT_FLOAT3,
+                                                               3 * sizeof(float), std::size_t(surface.V.rows())));
+  auto* indices = static_cast<unsigned*>(rtcSetNewGeometryBuffer(geometry, RTC_BUFFER_TYPE_INDEX, 0, RTC_FORMAT_UINT3,
+                                                                 3 * sizeof(unsigned), std::size_t(surface.F.rows())));
+  if (vertices == nullptr || indices == nullptr) {
+    rtcReleaseGeometry(geometry);
+    throw_if_embree_failed(name + ": rtcSetNewGeometryBuffer", m.device);
+    throw Error(name + ": rtcSetNewGeometryBuffer failed");
   }
-  impl_->tree.insert(impl_->triangles.cbegin(), impl_->triangles.cend());
-  // Build both the hierarchy and the distance-query KD tree now: lazy construction inside a const
-  // query would serialise the first parallel queries on CGAL's mutex.
-  impl_->tree.build();
-  impl_->tree.accelerate_distance_queries();
+  for (Eigen::Index i = 0; i < surface.V.rows(); ++i)
+    for (int c = 0; c < 3; ++c) vertices[3 * i + c] = float(surface.V(i, c) - m.shift(c));
+  for (Eigen::Index f = 0; f < surface.F.rows(); ++f)
+    for (int c = 0; c < 3; ++c) indices[3 * f + c] = unsigned(surface.F(f, c));
+  rtcCommitGeometry(geometry);
+  rtcAttachGeometry(m.scene, geometry);
+  rtcReleaseGeometry(geometry);
+  throw_if_embree_failed(name + ": rtcCommitGeometry", m.device);
+  rtcCommitScene(m.scene);
+  throw_if_embree_failed(name + ": rtcCommitScene", m.device);
 }
 
 SurfaceLocator::~SurfaceLocator() = default;
 
 SurfaceHit SurfaceLocator::closest(const Eigen::Vector3d& query) const {
-  const Point3 q(query.x(), query.y(), query.z());
-  const auto [point, id] = impl_->tree.closest_point_and_primitive(q);
+  if (!query.allFinite()) throw InvalidInput("SurfaceLocator::closest: non-finite query point");
+  const Impl& m = *impl_;
+  Search search;
+  search.faces = &m.faces;
+  search.query = query;
+  const Eigen::Vector3d local = query - m.shift;
+  const double reach = local.cwiseAbs().maxCoeff();
+  if (m.scene != nullptr && reach < kFloatReach) {
+    // Rounding the query and the vertices to float moves each coordinate by at most half an ulp, 2^-24 of its
+    // magnitude: sqrt(3) 2^-24 (|q| + |v|) in distance, well inside 4 FLT_EPSILON = 2^-21 of the sum.
+    search.slack = 4.0 * FLT_EPSILON * (m.extent + reach);
+    RTCPointQuery point;
+    point.x = float(local.x());
+    point.y = float(local.y());
+    point.z = float(local.z());
+    point.time = 0.0f;
+    point.radius = std::numeric_limits<float>::infinity();
+    RTCPointQueryContext context;
+    rtcInitPointQueryContext(&context);
+    rtcPointQuery(m.scene, &point, &context, visit_face, &search);
+    if (embree_error != RTC_ERROR_NONE) throw_if_embree_failed("SurfaceLocator::closest: rtcPointQuery", m.device);
+  } else {
+    for (std::size_t f = 0; f < m.faces.size(); ++f) search.visit(unsigned(f));
+  }
+  if (search.best_face < 0) throw Error("SurfaceLocator::closest: the point query found no face");
   SurfaceHit hit;
-  hit.point = Eigen::Vector3d(point.x(), point.y(), point.z());
-  hit.face = int(id - impl_->triangles.cbegin());
+  hit.point = search.best_point;
+  hit.face = search.best_face;
   hit.distance = (hit.point - query).norm();
-  const auto& F = impl_->F;
-  const auto& V = impl_->V;
-  hit.barycentric = barycentric_of(hit.point, V.row(F(hit.face, 0)).transpose(), V.row(F(hit.face, 1)).transpose(),
-                                   V.row(F(hit.face, 2)).transpose());
+  const Corners& t = m.faces[std::size_t(hit.face)];
+  hit.barycentric = barycentric_of(hit.point, t.p[0], t.p[1], t.p[2]);
   return hit;
 }
 

@@ -12,13 +12,15 @@ namespace morphmap {
 
 /// Closest point on a triangle surface.
 struct SurfaceHit {
-  Eigen::Vector3d point = Eigen::Vector3d::Zero();  ///< closest point on the surface
-  int face = -1;                                    ///< triangle of the surface holding it
+  Eigen::Vector3d point = Eigen::Vector3d::Zero();        ///< closest point on the surface
+  int face = -1;                                          ///< triangle of the surface holding it
   Eigen::Vector3d barycentric = Eigen::Vector3d::Zero();  ///< weights of the face's three corners
   double distance = 0.0;
 };
 
-/// Closest-point queries on a fixed surface (CGAL AABB tree), safe to call from many threads.
+/// Closest-point queries on a fixed surface (Embree BVH, distances exact in double precision), safe to call from
+/// many threads. A point equally close to several faces (a vertex, an edge) reports the lowest-numbered one, so hits
+/// do not depend on the thread count. closest() throws InvalidInput for a non-finite query.
 class SurfaceLocator {
  public:
   explicit SurfaceLocator(const Surface& surface);
