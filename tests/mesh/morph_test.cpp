@@ -1,5 +1,5 @@
-// The distance-field morph's lattice values (mesh/morph.h): analytic shapes sampled exactly everywhere, meshes
-// exact where the morph can change sign and of the right sign everywhere.
+// The distance-field morph's lattice values (mesh/morph.h): analytic shapes sampled exactly everywhere, meshes of the
+// right sign everywhere and, where the morph can change sign, exact beyond OpenVDB's band and close inside it.
 #include "mesh/morph.h"
 
 #include <gtest/gtest.h>
@@ -17,7 +17,7 @@ Surface shape(const std::string& spec, const std::optional<Eigen::AlignedBox3d>&
   return make_shape(parse_shape_spec(spec), fit);
 }
 
-TEST(DistanceMorph, AnalyticShapesAreSampledExactlyAndMeshesWhereTheMorphCanCross) {
+TEST(DistanceMorph, AnalyticShapesAreSampledExactlyAndMeshesExactlyBeyondTheBand) {
   const Surface A = shape("sphere:size=0.6,center=0/0/0");
   Surface B = shape("torus:size=1,center=0.1/0/0");
   const auto torus = B.signed_distance;
@@ -31,7 +31,7 @@ TEST(DistanceMorph, AnalyticShapesAreSampledExactlyAndMeshesWhereTheMorphCanCros
   // Tessellation error of the torus mesh (vertices on the surface, faces inside): well below a voxel.
   const double sagitta = 0.05 * f.voxel_size;
   const SurfaceLocator mesh_b(B);
-  int crossing_points = 0;
+  int crossing_points = 0, beyond = 0;
   for (int k = 0; k < f.dims.z(); ++k)
     for (int j = 0; j < f.dims.y(); ++j)
       for (int i = 0; i < f.dims.x(); ++i) {
@@ -42,13 +42,18 @@ TEST(DistanceMorph, AnalyticShapesAreSampledExactlyAndMeshesWhereTheMorphCanCros
         if (std::abs(exact) > sagitta) {
           EXPECT_EQ(f.dB[q] < 0.0f, exact < 0.0) << x.transpose();
         }
-        // Where the morph can change sign (dA and dB of opposite signs), dB is the mesh's own distance.
+        // Where the morph can change sign (dA and dB of opposite signs), dB is the mesh's own distance: exact beyond
+        // OpenVDB's band, within a fifth of a voxel inside it (measured: 14% at most).
         if ((f.dA[q] < 0.0f) != (f.dB[q] < 0.0f)) {
           ++crossing_points;
-          EXPECT_NEAR(std::abs(f.dB[q]), mesh_b.closest(x).distance, 1e-5) << x.transpose();
+          const double truth = mesh_b.closest(x).distance;
+          const bool beyond_band = truth > (options.band + 0.5) * f.voxel_size;
+          EXPECT_NEAR(std::abs(f.dB[q]), truth, beyond_band ? 1e-5 : 0.2 * f.voxel_size) << x.transpose();
+          beyond += beyond_band ? 1 : 0;
         }
       }
   EXPECT_GT(crossing_points, 100);
+  EXPECT_GT(beyond, 10);
 }
 
 TEST(DistanceMorph, TwoAnalyticShapesNeedNoQueries) {
