@@ -18,8 +18,7 @@ std::string allocator_tunables() {
   return value != nullptr ? value : "";
 }
 
-void tune_allocator(int argc, char** argv) {
-  (void)argc;
+void tune_allocator(char** argv) {
   const char* opt_out = std::getenv("MORPHMAP_NO_ALLOCATOR_TUNING");
   if (opt_out != nullptr && std::strcmp(opt_out, "0") != 0) return;
   const std::string current = allocator_tunables();

@@ -19,7 +19,7 @@ extern const char* const kAllocatorTunables;
 /// The process keeps its pid, so a parent's wait and PR_SET_PDEATHSIG still apply. Does nothing when
 /// MORPHMAP_NO_ALLOCATOR_TUNING is set (to anything but 0), when GLIBC_TUNABLES already sets glibc.malloc.hugetlb
 /// (the user's choice wins), or when the re-execution fails (the run goes on with glibc's defaults).
-void tune_allocator(int argc, char** argv);
+void tune_allocator(char** argv);
 
 /// GLIBC_TUNABLES as this process sees it ("" when unset): report.json records it under "allocator".
 std::string allocator_tunables();

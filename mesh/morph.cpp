@@ -87,14 +87,14 @@ std::vector<std::uint8_t> crossing_corners(const MorphField& field) {
   return mark;
 }
 
-// Exact signed distances of an analytic shape at every lattice point.
-void sample_analytic(const Surface& surface, const MorphField& field, std::vector<float>& out) {
+// A signed distance function at every lattice point (analytic shapes, test fields).
+void sample_distance(const SignedDistance& distance, const MorphField& field, std::vector<float>& out) {
   out.assign(std::size_t(field.dims.prod()), 0.0f);
   tbb::parallel_for(tbb::blocked_range<int>(0, field.dims.z()), [&](const tbb::blocked_range<int>& range) {
     for (int k = range.begin(); k != range.end(); ++k)
       for (int j = 0; j < field.dims.y(); ++j)
         for (int i = 0; i < field.dims.x(); ++i)
-          out[std::size_t(field.index(i, j, k))] = float(surface.signed_distance(field.point(i, j, k)));
+          out[std::size_t(field.index(i, j, k))] = float(distance(field.point(i, j, k)));
   });
 }
 
@@ -138,18 +138,8 @@ MorphField sample_morph(const SignedDistance& dA, const SignedDistance& dB, doub
   field.voxel_size = 2.0 * extent / (n - 1);
   field.dims = Eigen::Vector3i(n, n, n);
   field.origin = Eigen::Vector3d::Constant(-extent);
-  field.dA.resize(std::size_t(n) * n * n);
-  field.dB.resize(field.dA.size());
-  tbb::parallel_for(tbb::blocked_range<int>(0, n), [&](const tbb::blocked_range<int>& range) {
-    for (int k = range.begin(); k != range.end(); ++k)
-      for (int j = 0; j < n; ++j)
-        for (int i = 0; i < n; ++i) {
-          const Eigen::Vector3d p = field.point(i, j, k);
-          const std::size_t q = std::size_t(field.index(i, j, k));
-          field.dA[q] = float(dA(p));
-          field.dB[q] = float(dB(p));
-        }
-  });
+  sample_distance(dA, field, field.dA);
+  sample_distance(dB, field, field.dB);
   return field;
 }
 
@@ -189,7 +179,7 @@ MorphResult build_morph(const Surface& A, const Surface& B, const MorphOptions& 
   for (const Surface* surface : {&A, &B}) {
     std::vector<float>& values = surface == &A ? field.dA : field.dB;
     if (surface->signed_distance) {
-      sample_analytic(*surface, field, values);
+      sample_distance(surface->signed_distance, field, values);
     } else {
       auto grid = signed_distance_grid(*surface, *xform, band);
       sample_lattice(*grid, field, values);

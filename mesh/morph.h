@@ -6,7 +6,6 @@
 #include <Eigen/Core>
 #include <Eigen/Geometry>
 #include <cstdint>
-#include <functional>
 #include <string>
 #include <vector>
 
@@ -65,9 +64,6 @@ MorphField morph_lattice(const Surface& A, const Surface& B, const MorphOptions&
 
 /// Builds dA and dB on a lattice covering both (closed, manifold) surfaces plus padding.
 MorphResult build_morph(const Surface& A, const Surface& B, const MorphOptions& options);
-
-/// Signed distance (negative inside) of an analytic shape.
-using SignedDistance = std::function<double(const Eigen::Vector3d&)>;
 
 /// Samples analytic signed distances on a cubic lattice of n^3 points spanning [-extent, extent]^3:
 /// exact fields for tests and benchmarks of the stages after the morph.

@@ -240,7 +240,7 @@ Surface make_shape(const ShapeSpec& spec, const std::optional<Eigen::AlignedBox3
   std::vector<Eigen::Vector2d> uvs;
   std::vector<Eigen::Vector3i> face_uvs;
   const bool textured = spec.kind == "sphere" && spec.texture;
-  std::function<double(const Eigen::Vector3d&)> distance;
+  SignedDistance distance;
   if (spec.kind == "sphere") {
     append_sphere(center, size, spec.resolution, textured, positions, faces, uvs, face_uvs);
     distance = [center, size](const Eigen::Vector3d& x) { return (x - center).norm() - size; };

@@ -19,6 +19,9 @@ struct RgbImage {
   std::vector<std::uint8_t> pixels;
 };
 
+/// Signed distance (negative inside) of an analytic shape.
+using SignedDistance = std::function<double(const Eigen::Vector3d&)>;
+
 /// A triangle surface with optional per-corner texture coordinates.
 /// Faces are counter-clockwise seen from outside (outward normals).
 struct Surface {
@@ -31,7 +34,7 @@ struct Surface {
   std::string name;                         ///< file path or built-in spec, used in messages
   /// Built-in analytic shapes: the exact signed distance (negative inside) of the shape the triangles approximate
   /// (their vertices lie on it). The distance-field morph samples it instead of the mesh's distance. Empty for meshes.
-  std::function<double(const Eigen::Vector3d&)> signed_distance;
+  SignedDistance signed_distance;
 
   bool has_uv() const { return UV.rows() > 0 && FUV.rows() == F.rows(); }
   bool has_texture() const { return texture != nullptr || !texture_path.empty(); }
