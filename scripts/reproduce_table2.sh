@@ -2,15 +2,21 @@
 # Reproduces Table II of the paper (§9, execution statistics) with `morphmap batch`: its five morphs at tet counts
 # near the paper's, the map solved by the default backend (converged) and the paper's Gauss-Seidel diffusion run
 # on the same system for the diffusion column. Prints a Markdown table, the paper's row above ours, with the ratio of total times.
-#   usage: scripts/reproduce_table2.sh MODELS_DIR [OUT_DIR]   (OUT_DIR defaults to out/table2; rerunning resumes)
+# The machines are shared and noisy: the batch runs RUNS times (the first with the Gauss-Seidel comparison, the others
+# the maps alone, in OUT_DIR/timing-<k>), so every row is timed RUNS times interleaved with the others, and the
+# table's total is the median map time, its range beside it.
+#   usage: scripts/reproduce_table2.sh MODELS_DIR [OUT_DIR] [RUNS]   (OUT_DIR defaults to out/table2, RUNS to 3;
+#   rerunning resumes)
 set -euo pipefail
 if [ $# -lt 1 ] || [ ! -d "$1" ]; then
-  echo "usage: $0 MODELS_DIR [OUT_DIR]  (MODELS_DIR holds bunny_closed.obj, happy_buddha_100k.obj, cow.off, horse.obj)" >&2
+  echo "usage: $0 MODELS_DIR [OUT_DIR] [RUNS]  (MODELS_DIR holds bunny_closed.obj, happy_buddha_100k.obj, cow.off, horse.obj)" >&2
   exit 2
 fi
 models="$(cd "$1" && pwd)"
 repo="$(cd "$(dirname "$0")/.." && pwd)"
 out="${2:-$repo/out/table2}"
+runs="${3:-3}"
+case "$runs" in '' | *[!0-9]* | 0) echo "$0: RUNS must be a positive integer, not '$runs'" >&2; exit 2 ;; esac
 mkdir -p "$out"
 out="$(cd "$out" && pwd)"
 for f in bunny_closed.obj happy_buddha_100k.obj cow.off horse.obj; do
@@ -21,21 +27,25 @@ done
 # --voxels chosen (measured) so that the tet counts land near the paper's: 0.22, 0.42, 0.86, 1.36, 1.69 million.
 # The Gauss-Seidel comparison stops at each row's own threshold in Table II (1e-5, 1.2e-4 for the Buddha, 2.5e-3 for
 # cow -> horse), measured as the paper does (the total change of s in a sweep), or at 20000 sweeps (marked "cap").
-cat >"$out/manifest.json" <<EOF
-{
-  "defaults": {"time-steps": 10, "compare-solvers": ["gauss-seidel"]},
-  "jobs": [
+jobs=$(cat <<EOF
     {"name": "sphere-torus", "source": "sphere", "target": "torus", "voxels": 13},
     {"name": "sphere-bunny", "source": "sphere", "target": "$models/bunny_closed.obj", "voxels": 20, "time-steps": 6},
     {"name": "splitting-sphere", "source": "sphere", "target": "two-spheres", "voxels": 25},
     {"name": "sphere-buddha", "source": "sphere", "target": "$models/happy_buddha_100k.obj", "voxels": 32, "change-threshold": 0.00012},
     {"name": "cow-horse", "source": "$models/cow.off", "target": "$models/horse.obj", "voxels": 63, "align": "bbox", "change-threshold": 0.0025}
-  ]
-}
 EOF
-
+)
+printf '{"defaults": {"time-steps": 10, "compare-solvers": ["gauss-seidel"]},\n "jobs": [\n%s\n ]}\n' "$jobs" \
+  >"$out/manifest.json"
 status=0
 "$repo/build/morphmap" batch "$out/manifest.json" -o "$out" || status=$?
+summaries="$out/summary.csv"
+for ((run = 2; run <= runs; ++run)); do
+  mkdir -p "$out/timing-$run"
+  printf '{"defaults": {"time-steps": 10},\n "jobs": [\n%s\n ]}\n' "$jobs" >"$out/timing-$run/manifest.json"
+  "$repo/build/morphmap" batch "$out/timing-$run/manifest.json" -o "$out/timing-$run" || status=$?
+  summaries="$summaries $out/timing-$run/summary.csv"
+done
 
 # Paper rows: job|morph|tets|steps|diffusion iters|secs|conv|implicit iters|secs|conv|label prop iters|secs.
 paper='sphere-torus|Sphere to Torus|219998|10|469|24|0.00001|2|11|0.0|5|3
@@ -47,18 +57,21 @@ cow-horse|Cow to Horse|1692940|10|7|41|0.00250|-|-|-|10|50'
 echo
 echo "Table II: paper (2 GHz AMD PC) above ours ($(nproc) cores, $(uname -m)). Paper total = the seconds its row lists"
 echo "(diffusion + implicit + label propagation); ours = the map end to end with the converged default solve (load, morph,"
-echo "extraction, solve, transport, outputs), the Gauss-Seidel comparison not included; ratio = paper / ours. The last"
-echo "column is the whole job with the comparison diffusion, wall and CPU seconds (on a shared machine wall >> CPU / cores)."
+echo "extraction, solve, transport, outputs), the Gauss-Seidel comparison not included: the median of $runs runs (their"
+echo "range in brackets); ratio = paper / that median. The other columns are the first run's; the last is its whole job"
+echo "with the comparison diffusion, wall and CPU seconds (on a shared machine wall >> CPU / cores)."
 echo
-echo "| morph | who | tets | steps | diffusion (iters, s, conv) | implicit/direct (iters, s, residual) | label prop (passes, s) | total s | ratio | with GS: wall s, CPU s |"
+echo "| morph | who | tets | steps | diffusion (iters, s, conv) | implicit/direct (iters, s, residual) | label prop (passes, s) | total s [range] | ratio | with GS: wall s, CPU s |"
 echo "|---|---|--:|--:|---|---|---|--:|--:|---|"
-awk -F',' -v paper="$paper" '
+# shellcheck disable=SC2086  # $summaries: one word per run's summary.csv (paths under OUT_DIR)
+awk -F',' -v paper="$paper" -v first="$out/summary.csv" '
   BEGIN {
     n = split(paper, lines, "\n")
     for (i = 1; i <= n; ++i) { split(lines[i], f, "|"); order[i] = f[1]; row[f[1]] = lines[i] }
   }
-  NR == 1 { for (c = 1; c <= NF; ++c) col[$c] = c; next }
-  { seen[$1] = 1; for (c = 1; c <= NF; ++c) v[$1, c] = $c }
+  FNR == 1 { for (c = 1; c <= NF; ++c) col[$c] = c; next }
+  FILENAME == first { seen[$1] = 1; for (c = 1; c <= NF; ++c) v[$1, c] = $c }
+  $col["status"] == "ok" { times[$1, ++count[$1]] = $col["map_seconds"] + 0 }
   END {
     for (i = 1; i <= n; ++i) {
       job = order[i]; split(row[job], p, "|")
@@ -67,15 +80,19 @@ awk -F',' -v paper="$paper" '
       printf "| %s | paper | %s | %s | %s, %s, %s | %s | %s, %s | %d | | |\n", p[2], p[3], p[4], p[5], p[6], p[7], implicit, p[11], p[12], ptotal
       if (!(job in seen)) { printf "| | ours | not run | | | | | | | |\n"; continue }
       if (v[job, col["status"]] != "ok") { printf "| | ours | %s: %s | | | | | | | |\n", v[job, col["status"]], v[job, col["error"]]; continue }
-      t = v[job, col["map_seconds"]]
-      printf "| | ours | %s | %s | %s, %.2f, %.2g | %s %s, %.2f, %.2g | %s, %.2f | %.2f | %.1f× | %.2f, %.2f |\n",
+      m = count[job]
+      for (a = 2; a <= m; ++a)  # insertion sort of the runs map times
+        for (b = a; b > 1 && times[job, b - 1] > times[job, b]; --b) { x = times[job, b]; times[job, b] = times[job, b - 1]; times[job, b - 1] = x }
+      t = m % 2 ? times[job, (m + 1) / 2] : (times[job, m / 2] + times[job, m / 2 + 1]) / 2
+      range = m > 1 ? sprintf(" [%.2f–%.2f]", times[job, 1], times[job, m]) : ""
+      printf "| | ours | %s | %s | %s, %.2f, %.2g | %s %s, %.2f, %.2g | %s, %.2f | %.2f%s | %.1f× | %.2f, %.2f |\n",
         v[job, col["tets"]], v[job, col["time_steps"]],
         v[job, col["diffusion_iterations"]] (v[job, col["diffusion_iterations"]] >= 20000 ? " (cap)" : ""),
         v[job, col["diffusion_seconds"]], v[job, col["diffusion_conv"]],
         v[job, col["solve_backend"]], v[job, col["solve_iterations"]], v[job, col["solve_seconds"]], v[job, col["solve_residual"]],
-        (v[job, col["label_passes"]] == "" ? "trace" : v[job, col["label_passes"]]), v[job, col["label_seconds"]], t, ptotal / t, v[job, col["total_seconds"]], v[job, col["cpu_seconds"]]
+        (v[job, col["label_passes"]] == "" ? "trace" : v[job, col["label_passes"]]), v[job, col["label_seconds"]], t, range, ptotal / t, v[job, col["total_seconds"]], v[job, col["cpu_seconds"]]
     }
-  }' "$out/summary.csv"
+  }' $summaries
 echo
 echo "Per-job outputs and report.json in $out; summary.csv and summary.md there too."
 exit "$status"
