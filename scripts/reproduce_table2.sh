@@ -44,7 +44,7 @@ for ((run = 2; run <= runs; ++run)); do
   mkdir -p "$out/timing-$run"
   printf '{"defaults": {"time-steps": 10},\n "jobs": [\n%s\n ]}\n' "$jobs" >"$out/timing-$run/manifest.json"
   "$repo/build/morphmap" batch "$out/timing-$run/manifest.json" -o "$out/timing-$run" || status=$?
-  summaries="$summaries $out/timing-$run/summary.csv"
+  if [ -f "$out/timing-$run/summary.csv" ]; then summaries="$summaries $out/timing-$run/summary.csv"; fi
 done
 
 # Paper rows: job|morph|tets|steps|diffusion iters|secs|conv|implicit iters|secs|conv|label prop iters|secs.
