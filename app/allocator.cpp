@@ -18,24 +18,29 @@ std::string allocator_tunables() {
   return value != nullptr ? value : "";
 }
 
-void tune_allocator(char** argv) {
+bool set_allocator_tunables(std::string& previous) {
+  previous = allocator_tunables();
   const char* opt_out = std::getenv("MORPHMAP_NO_ALLOCATOR_TUNING");
-  if (opt_out != nullptr && std::strcmp(opt_out, "0") != 0) return;
-  const std::string current = allocator_tunables();
-  // Already set (by us before the re-execution, or by the user): never re-execute twice.
-  if (current.find("glibc.malloc.hugetlb") != std::string::npos) return;
-  const std::string tunables = current.empty() ? kAllocatorTunables : current + ":" + kAllocatorTunables;
+  if (opt_out != nullptr && std::strcmp(opt_out, "0") != 0) return false;
+  // Already set (by us before, or by the user): never append twice.
+  if (previous.find("glibc.malloc.hugetlb") != std::string::npos) return false;
+  const std::string tunables = previous.empty() ? kAllocatorTunables : previous + ":" + kAllocatorTunables;
+  return ::setenv("GLIBC_TUNABLES", tunables.c_str(), 1) == 0;
+}
+
+void tune_allocator(char** argv) {
   char self[PATH_MAX];
   const ssize_t length = ::readlink("/proc/self/exe", self, sizeof(self) - 1);
   if (length <= 0) return;
   self[length] = '\0';
-  if (::setenv("GLIBC_TUNABLES", tunables.c_str(), 1) != 0) return;
+  std::string previous;
+  if (!set_allocator_tunables(previous)) return;
   ::execv(self, argv);
   // Only reached when execv failed: run on with the defaults, and leave the environment as it was.
-  if (current.empty())
+  if (previous.empty())
     ::unsetenv("GLIBC_TUNABLES");
   else
-    ::setenv("GLIBC_TUNABLES", current.c_str(), 1);
+    ::setenv("GLIBC_TUNABLES", previous.c_str(), 1);
 }
 
 }  // namespace morphmap

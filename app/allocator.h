@@ -14,11 +14,17 @@ namespace morphmap {
 /// threshold) served from the heap, not from fresh mappings.
 extern const char* const kAllocatorTunables;
 
-/// Called first in main: when GLIBC_TUNABLES does not carry kAllocatorTunables yet, appends them and re-executes the
-/// same binary with the same arguments (glibc reads its tunables only at process start, before any constructor).
-/// The process keeps its pid, so a parent's wait and PR_SET_PDEATHSIG still apply. Does nothing when
-/// MORPHMAP_NO_ALLOCATOR_TUNING is set (to anything but 0), when GLIBC_TUNABLES already sets glibc.malloc.hugetlb
-/// (the user's choice wins), or when the re-execution fails (the run goes on with glibc's defaults).
+/// Appends kAllocatorTunables to GLIBC_TUNABLES in this process's environment, for a program about to be executed
+/// (glibc reads its tunables only at process start, before any constructor). Does nothing, and returns false, when
+/// MORPHMAP_NO_ALLOCATOR_TUNING is set (to anything but 0) or when GLIBC_TUNABLES already sets glibc.malloc.hugetlb
+/// (ours, set before, or the user's choice, which wins). `previous` receives GLIBC_TUNABLES as it was.
+bool set_allocator_tunables(std::string& previous);
+
+/// Called first in main: when set_allocator_tunables() changes the environment, re-executes the same binary with the
+/// same arguments. The process keeps its pid, so a parent's wait and PR_SET_PDEATHSIG still apply. The `morphmap`
+/// launcher (app/launcher.cpp) sets the tunables before it starts the program, so this re-executes only a program
+/// started directly (morphmap-run) or when the launcher's environment was refused. When the re-execution fails the
+/// run goes on with glibc's defaults.
 void tune_allocator(char** argv);
 
 /// GLIBC_TUNABLES as this process sees it ("" when unset): report.json records it under "allocator".

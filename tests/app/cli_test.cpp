@@ -169,6 +169,25 @@ TEST_F(Cli, AllocatorTunablesAreSetOnceAndCanBeRefused) {
   EXPECT_EQ(tunables("GLIBC_TUNABLES=glibc.malloc.hugetlb=0", "user"), "glibc.malloc.hugetlb=0");
 }
 
+TEST_F(Cli, LauncherRunsTheProgramBesideIt) {
+  // `morphmap` only sets the tunables and executes morphmap-run from its own folder (app/launcher.cpp): a copy
+  // without the program says which file it could not run, with the shell's status for a missing command.
+  const fs::path lone = dir_ / "morphmap";
+  fs::copy_file(MORPHMAP_BINARY, lone);
+  FILE* pipe = popen((lone.string() + " --help 2>&1").c_str(), "r");
+  ASSERT_NE(pipe, nullptr);
+  std::string output;
+  std::array<char, 4096> buffer{};
+  while (fgets(buffer.data(), int(buffer.size()), pipe)) output += buffer.data();
+  const int raw = pclose(pipe);
+  EXPECT_EQ(WIFEXITED(raw) ? WEXITSTATUS(raw) : -1, 127) << output;
+  EXPECT_NE(output.find((dir_ / "morphmap-run").string()), std::string::npos) << output;
+  // Beside the program it is the program: its help, status 0.
+  const CommandRun help = run_command("--help");
+  EXPECT_EQ(help.status, 0) << help.output;
+  EXPECT_NE(help.output.find("SUBCOMMAND"), std::string::npos) << help.output;
+}
+
 TEST_F(Cli, MemoryGuardRefusesBeforeAllocating) {
   expect_rejected("sphere torus --max-memory 100M", "--max-memory");
   expect_rejected("sphere torus --max-memory lots", "lots");
