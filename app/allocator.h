@@ -23,8 +23,7 @@ bool set_allocator_tunables(std::string& previous);
 /// Called first in main: when set_allocator_tunables() changes the environment, re-executes the same binary with the
 /// same arguments. The process keeps its pid, so a parent's wait and PR_SET_PDEATHSIG still apply. The `morphmap`
 /// launcher (app/launcher.cpp) sets the tunables before it starts the program, so this re-executes only a program
-/// started directly (morphmap-run) or when the launcher's environment was refused. When the re-execution fails the
-/// run goes on with glibc's defaults.
+/// started directly (morphmap-run). When the re-execution fails the run goes on with glibc's defaults.
 void tune_allocator(char** argv);
 
 /// GLIBC_TUNABLES as this process sees it ("" when unset): report.json records it under "allocator".
