@@ -76,7 +76,7 @@ std::string format_time(double t) {
   return s.str();
 }
 
-void load_inputs(const PipelineOptions& options, Surface& A, Surface& B) {
+void load_inputs(const PipelineOptions& options, Surface& A, Surface& B, SurfaceCheck& check_a, SurfaceCheck& check_b) {
   const bool a_builtin = is_builtin_shape(options.source), b_builtin = is_builtin_shape(options.target);
   // Parse both specs first so that a bad spec is reported before any file is read.
   std::optional<ShapeSpec> a_spec, b_spec;
@@ -86,8 +86,8 @@ void load_inputs(const PipelineOptions& options, Surface& A, Surface& B) {
   if (!a_builtin) A = read_surface(options.source);
   if (b_builtin) B = make_shape(*b_spec, a_builtin ? std::nullopt : std::optional(bounding_box(A.V)));
   if (a_builtin) A = make_shape(*a_spec, std::optional(bounding_box(B.V)));
-  validate_surface(A, true);
-  validate_surface(B, true);
+  check_a = validate_surface(A, true);
+  check_b = validate_surface(B, true);
   if (!options.texture.empty()) {
     if (!A.has_uv())
       throw InvalidInput(options.texture + ": --texture needs texture coordinates on the source, which " +
@@ -338,7 +338,8 @@ PipelineResult run_pipeline(const PipelineOptions& options) {
 
   auto start = Clock::now();
   Surface A, B;
-  load_inputs(options, A, B);
+  SurfaceCheck input_check_a, input_check_b;
+  load_inputs(options, A, B, input_check_a, input_check_b);
   Frame frame_a, frame_b;
   if (options.align == "bbox") {
     frame_a = normalise(A);
@@ -536,6 +537,9 @@ PipelineResult run_pipeline(const PipelineOptions& options) {
   PipelineResult result;
   result.target = target_boundary(mesh, transport.labels);
   const Eigen::Index extracted_vertices = result.target.V.rows(), extracted_triangles = result.target.F.rows();
+  const auto check_b_start = Clock::now();
+  const SurfaceCheck extracted_check_b = check_surface(Eigen::MatrixXi(result.target.F), extracted_vertices);
+  const double extracted_check_b_seconds = seconds_since(check_b_start);
   const bool user_target = !options.target_mesh.empty();
   if (user_target) {
     result.target = user_target_mesh(options, frame_b, result.target, [&](const std::vector<MeshPoint>& points) {
@@ -554,7 +558,7 @@ PipelineResult run_pipeline(const PipelineOptions& options) {
     trace_target_labels(result.target);
   }
   const std::vector<SurfaceHit> hits = locator.closest_all(result.target.labels);
-  seconds["map"] = seconds_since(start) + locator_seconds;
+  seconds["map"] = seconds_since(start) + locator_seconds - extracted_check_b_seconds;  // that check is topology's
   progress.stage("map", seconds["map"]);
 
   start = Clock::now();
@@ -744,6 +748,34 @@ PipelineResult run_pipeline(const PipelineOptions& options) {
                      {"fallback",
                       "a trace whose flow stalls continues down the steepest descent of s (descended); one that "
                       "still cannot reach A (s flat) takes the closest point of A to where it stopped (stalled)"}};
+  {
+    // The lattice can open or close handles and join or split parts (thin ears, narrow gaps): the extracted B is then
+    // not the target's topology, and no map onto it is one-to-one with the target; say so.
+    const auto topology_start = Clock::now();
+    const SliceMesh extracted_a = source_boundary(mesh, Eigen::MatrixXd());
+    const SurfaceCheck extracted_check_a = check_surface(Eigen::MatrixXi(extracted_a.F), extracted_a.V.rows());
+    nlohmann::json warnings = nlohmann::json::array();
+    auto side = [&](const char* name, const std::string& file, const SurfaceCheck& input,
+                    const SurfaceCheck& extracted) {
+      if (input.euler() != extracted.euler() || input.components != extracted.components) {
+        std::ostringstream w;
+        w << "the " << name << " as extracted on the lattice (" << file << ") has Euler characteristic "
+          << extracted.euler() << " in " << extracted.components << " component(s), the input " << input.euler()
+          << " in " << input.components
+          << ": the voxel size joins or splits parts or opens or closes handles; another --voxels may keep them";
+        warnings.push_back(w.str());
+      }
+      return nlohmann::json{{"input_euler", input.euler()},
+                            {"input_components", input.components},
+                            {"extracted_euler", extracted.euler()},
+                            {"extracted_components", extracted.components}};
+    };
+    report["topology"] = {{"source", side("source", options.source, input_check_a, extracted_check_a)},
+                          {"target", side("target", options.target, input_check_b, extracted_check_b)},
+                          {"warnings", warnings}};
+    for (const auto& w : warnings) std::fprintf(stderr, "morphmap: warning: %s\n", w.get<std::string>().c_str());
+    seconds["topology"] = seconds_since(topology_start) + extracted_check_b_seconds;
+  }
   {
     const ComponentCensus census = component_census(mesh);
     report["components"] = {

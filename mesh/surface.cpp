@@ -119,10 +119,28 @@ SurfaceCheck check_surface(const Eigen::MatrixXi& F, std::int64_t vertex_count) 
   for (int n : fans) {
     if (n > 1) ++check.nonmanifold_vertices;
   }
+
+  for (std::size_t i = 0; i < uses.size(); ++i) check.edges += (i == 0 || uses[i].key != uses[i - 1].key) ? 1 : 0;
+  check.faces = face_count - check.degenerate_faces;
+  std::vector<int> component(static_cast<std::size_t>(std::max<std::int64_t>(vertex_count, 0)));
+  std::iota(component.begin(), component.end(), 0);
+  std::vector<char> used(component.size(), 0);
+  for (int f = 0; f < face_count; ++f)
+    for (int k = 0; k < 3; ++k) {
+      const int v = F(f, k);
+      if (v < 0 || v >= vertex_count) continue;
+      used[std::size_t(v)] = 1;
+      if (k > 0 && F(f, 0) >= 0 && F(f, 0) < vertex_count) unite(component, F(f, 0), v);
+    }
+  for (std::int64_t v = 0; v < vertex_count; ++v) {
+    if (!used[std::size_t(v)]) continue;
+    ++check.vertices;
+    if (find_root(component, int(v)) == int(v)) ++check.components;
+  }
   return check;
 }
 
-void validate_surface(const Surface& surface, bool require_closed) {
+SurfaceCheck validate_surface(const Surface& surface, bool require_closed) {
   const std::string name = display_name(surface);
   const Eigen::MatrixXd& V = surface.V;
   const Eigen::MatrixXi& F = surface.F;
@@ -165,7 +183,7 @@ void validate_surface(const Surface& surface, bool require_closed) {
       }
     }
   }
-  if (!require_closed) return;
+  if (!require_closed) return {};
 
   const SurfaceCheck check = check_surface(F, n);
   if (!check.closed()) {
@@ -183,6 +201,7 @@ void validate_surface(const Surface& surface, bool require_closed) {
     throw InvalidInput(name + ": surface is not consistently oriented (" + std::to_string(check.inconsistent_edges) +
                        " edges traversed in the same direction by both faces)");
   }
+  return check;
 }
 
 Eigen::AlignedBox3d bounding_box(const Eigen::MatrixXd& V) {

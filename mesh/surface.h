@@ -47,16 +47,24 @@ struct SurfaceCheck {
   std::int64_t inconsistent_edges = 0;    ///< edges whose two faces traverse them in the same direction
   std::int64_t degenerate_faces = 0;      ///< faces with a repeated vertex index
   std::int64_t nonmanifold_vertices = 0;  ///< vertices whose incident faces form more than one fan
+  std::int64_t vertices = 0;              ///< vertices some face uses
+  std::int64_t edges = 0;                 ///< distinct edges of the non-degenerate faces
+  std::int64_t faces = 0;                 ///< non-degenerate faces
+  std::int64_t components = 0;            ///< connected components (vertices joined by faces)
+  /// V - E + F: 2 per sphere, 0 per torus, 2 - 2g per component of genus g (closed orientable surfaces).
+  std::int64_t euler() const { return vertices - edges + faces; }
   bool closed() const { return boundary_edges == 0; }
   bool manifold() const { return nonmanifold_edges == 0 && nonmanifold_vertices == 0 && degenerate_faces == 0; }
 };
 
-/// Counts boundary, non-manifold and inconsistently oriented edges. Indices must be in range.
+/// Counts boundary, non-manifold and inconsistently oriented edges, and the surface's vertices, edges, faces and
+/// components. Indices must be in range.
 SurfaceCheck check_surface(const Eigen::MatrixXi& F, std::int64_t vertex_count);
 
 /// Throws InvalidInput ("<name>: <problem>") unless the surface is non-empty, finite, has face indices
-/// in range, and (when `require_closed`) is closed and manifold.
-void validate_surface(const Surface& surface, bool require_closed);
+/// in range, and (when `require_closed`) is closed and manifold; then returns its check_surface (otherwise an
+/// empty SurfaceCheck).
+SurfaceCheck validate_surface(const Surface& surface, bool require_closed);
 
 /// Axis-aligned bounding box of the vertices.
 Eigen::AlignedBox3d bounding_box(const Eigen::MatrixXd& V);

@@ -169,6 +169,40 @@ TEST_F(Cli, AllocatorTunablesAreSetOnceAndCanBeRefused) {
   EXPECT_EQ(tunables("GLIBC_TUNABLES=glibc.malloc.hugetlb=0", "user"), "glibc.malloc.hugetlb=0");
 }
 
+TEST_F(Cli, TopologyTheLatticeChangesIsReported) {
+  // Two unit cubes 0.1 apart; at 7 voxels (h = 0.3) no lattice point falls in the gap, so the extracted target is
+  // one closed surface where the input has two.
+  std::ostringstream obj;
+  for (const double x0 : {0.0, 1.1}) {
+    for (int c = 0; c < 8; ++c) obj << "v " << x0 + (c & 1) << ' ' << ((c >> 1) & 1) << ' ' << ((c >> 2) & 1) << '\n';
+  }
+  // Outward triangles of the cube with corners 1..8 (bit 0: x, bit 1: y, bit 2: z).
+  const int faces[12][3] = {{1, 3, 4}, {1, 4, 2}, {5, 6, 8}, {5, 8, 7}, {1, 2, 6}, {1, 6, 5},
+                            {3, 7, 8}, {3, 8, 4}, {1, 5, 7}, {1, 7, 3}, {2, 4, 8}, {2, 8, 6}};
+  for (const int offset : {0, 8})
+    for (const auto& f : faces) obj << "f " << f[0] + offset << ' ' << f[1] + offset << ' ' << f[2] + offset << '\n';
+  const std::string cubes = write("cubes.obj", obj.str());
+  const fs::path out = dir_ / "cubes";
+  const CommandRun r = run_command("map sphere " + cubes + " -o " + out.string() + " --voxels 7 --time-steps 4");
+  ASSERT_EQ(r.status, 0) << r.output;
+  const nlohmann::json topology = nlohmann::json::parse(std::ifstream(out / "report.json"))["topology"];
+  EXPECT_EQ(topology["target"]["input_components"], 2) << topology.dump();
+  EXPECT_EQ(topology["target"]["input_euler"], 4) << topology.dump();
+  EXPECT_EQ(topology["target"]["extracted_components"], 1) << topology.dump();
+  EXPECT_EQ(topology["target"]["extracted_euler"], 2) << topology.dump();
+  EXPECT_EQ(topology["source"]["extracted_euler"], topology["source"]["input_euler"]) << topology.dump();
+  ASSERT_EQ(topology["warnings"].size(), 1u) << topology.dump();
+  EXPECT_NE(r.output.find("warning: the target as extracted"), std::string::npos) << r.output;
+  // At 40 voxels the gap holds lattice points and both cubes survive; a torus keeps its handle: no warning.
+  const fs::path fine = dir_ / "fine";
+  ASSERT_EQ(run_command("map sphere " + cubes + " -o " + fine.string() + " --voxels 40 --time-steps 4").status, 0);
+  EXPECT_TRUE(nlohmann::json::parse(std::ifstream(fine / "report.json"))["topology"]["warnings"].empty());
+  const fs::path torus = dir_ / "torus";
+  const CommandRun t = run_command("map sphere torus -o " + torus.string() + " --voxels 12 --time-steps 4");
+  ASSERT_EQ(t.status, 0) << t.output;
+  EXPECT_EQ(t.output.find("warning"), std::string::npos) << t.output;
+}
+
 TEST_F(Cli, LauncherRunsTheProgramBesideIt) {
   // `morphmap` only sets the tunables and executes morphmap-run from its own folder (app/launcher.cpp): a copy
   // without the program says which file it could not run, with the shell's status for a missing command.

@@ -6,6 +6,7 @@
 #include <chrono>
 #include <cmath>
 #include <limits>
+#include <tuple>
 
 #include "mesh/errors.h"
 #include "mesh/shapes.h"
@@ -46,6 +47,33 @@ TEST(SurfaceCheck, ClosedTetrahedronIsClosedManifoldConsistent) {
   EXPECT_EQ(c.nonmanifold_vertices, 0);
   EXPECT_EQ(c.degenerate_faces, 0);
   EXPECT_NO_THROW(validate_surface(s, true));
+}
+
+TEST(SurfaceCheck, CountsEulerCharacteristicAndComponents) {
+  const Surface tet = tetrahedron();
+  const SurfaceCheck one = check_surface(tet.F, tet.V.rows());
+  EXPECT_EQ(one.vertices, 4);
+  EXPECT_EQ(one.edges, 6);
+  EXPECT_EQ(one.faces, 4);
+  EXPECT_EQ(one.euler(), 2);
+  EXPECT_EQ(one.components, 1);
+  // Two disjoint copies, and an unused vertex that must not count.
+  Eigen::MatrixXi F(8, 3);
+  F << tet.F, tet.F.array() + 5;
+  const SurfaceCheck two = check_surface(F, 9);
+  EXPECT_EQ(two.vertices, 8);
+  EXPECT_EQ(two.euler(), 4);
+  EXPECT_EQ(two.components, 2);
+  // The built-in shapes: a sphere, a torus (one handle), two spheres.
+  const Eigen::AlignedBox3d box(Eigen::Vector3d::Constant(-1.0), Eigen::Vector3d::Constant(1.0));
+  for (const auto& [spec, euler, components] :
+       {std::tuple<const char*, int, int>{"sphere", 2, 1}, {"torus", 0, 1}, {"two-spheres", 4, 2}}) {
+    const Surface shape = make_shape(parse_shape_spec(spec), box);
+    const SurfaceCheck c = validate_surface(shape, true);
+    EXPECT_EQ(c.euler(), euler) << spec;
+    EXPECT_EQ(c.components, components) << spec;
+    EXPECT_EQ(c.edges * 2, c.faces * 3) << spec;  // closed
+  }
 }
 
 TEST(SurfaceCheck, MissingFaceLeavesThreeBoundaryEdges) {
