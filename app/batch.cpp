@@ -128,6 +128,7 @@ const std::vector<std::string> kColumns = {"job",
                                            "total_seconds",
                                            "cpu_seconds",
                                            "peak_memory_bytes",
+                                           "warnings",
                                            "error"};
 
 std::vector<std::string> cells(const SummaryRow& r) {
@@ -148,6 +149,7 @@ std::vector<std::string> cells(const SummaryRow& r) {
           number(r.total_seconds, 4),
           number(r.cpu_seconds, 4),
           integer(r.peak_memory_bytes),
+          r.warnings,
           r.error};
 }
 
@@ -496,6 +498,9 @@ SummaryRow summary_row(const std::string& job, const std::string& report_json) {
   row.cpu_seconds = optional_at<double>(r, "/cpu_seconds"_json_pointer);
   if (row.total_seconds)
     row.map_seconds = *row.total_seconds - optional_at<double>(r, "/seconds/compare"_json_pointer).value_or(0.0);
+  if (r.contains("/topology/warnings"_json_pointer) && r["topology"]["warnings"].is_array())
+    for (const json& w : r["topology"]["warnings"])
+      if (w.is_string()) row.warnings += (row.warnings.empty() ? "" : "; ") + w.get<std::string>();
   return row;
 }
 

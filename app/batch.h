@@ -46,7 +46,8 @@ struct SummaryRow {
   std::optional<double> total_seconds;  ///< the whole job, comparison solves included
   std::optional<double> cpu_seconds;    ///< the job's CPU time (user + system, all threads)
   std::optional<std::int64_t> peak_memory_bytes;
-  std::string error;  ///< failed: the job's one-line error
+  std::string warnings;  ///< report.json's topology warnings, joined by "; " (the lattice changed A's or B's topology)
+  std::string error;     ///< failed: the job's one-line error
 };
 
 /// The row of a job from the text of its report.json (status "ok"). Throws InvalidInput if it is not JSON.

@@ -244,6 +244,11 @@ TEST_F(Batch, SummaryRowTakesDiffusionAndSolveFromEitherSide) {
   row = summary_row("t", report.dump());
   EXPECT_FALSE(row.label_passes.has_value());
   EXPECT_DOUBLE_EQ(*row.label_seconds, 0.75);
+  EXPECT_EQ(row.warnings, "");
+  // Topology warnings are joined into one cell.
+  report["topology"] = {{"warnings", {"the target, as extracted, has two parts", "and a handle"}}};
+  row = summary_row("t", report.dump());
+  EXPECT_EQ(row.warnings, "the target, as extracted, has two parts; and a handle");
   // Errors with commas and quotes survive the CSV.
   SummaryRow failed;
   failed.job = "f";
@@ -254,6 +259,8 @@ TEST_F(Batch, SummaryRowTakesDiffusionAndSolveFromEitherSide) {
   ASSERT_EQ(csv.size(), 3u);
   EXPECT_EQ(cell(csv, 2, "error"), failed.error);
   EXPECT_EQ(cell(csv, 1, "tets"), "1234");
+  EXPECT_EQ(cell(csv, 1, "warnings"), row.warnings);
+  EXPECT_EQ(cell(csv, 2, "warnings"), "");
   EXPECT_NE(summary_markdown({row, failed}).find("| f | failed |"), std::string::npos);
 }
 
