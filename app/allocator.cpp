@@ -28,14 +28,19 @@ bool set_allocator_tunables(std::string& previous) {
   return ::setenv("GLIBC_TUNABLES", tunables.c_str(), 1) == 0;
 }
 
-void tune_allocator(char** argv) {
+std::string executable_path() {
   char self[PATH_MAX];
-  const ssize_t length = ::readlink("/proc/self/exe", self, sizeof(self) - 1);
-  if (length <= 0) return;
-  self[length] = '\0';
+  const ssize_t length = ::readlink("/proc/self/exe", self, sizeof(self));
+  return length > 0 && length < ssize_t(sizeof(self)) ? std::string(self, std::size_t(length))
+                                                      : std::string();  // not truncated
+}
+
+void tune_allocator(char** argv) {
+  const std::string self = executable_path();
+  if (self.empty()) return;
   std::string previous;
   if (!set_allocator_tunables(previous)) return;
-  ::execv(self, argv);
+  ::execv(self.c_str(), argv);
   // Only reached when execv failed: run on with the defaults, and leave the environment as it was.
   if (previous.empty())
     ::unsetenv("GLIBC_TUNABLES");

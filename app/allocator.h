@@ -26,6 +26,9 @@ bool set_allocator_tunables(std::string& previous);
 /// started directly (morphmap-run). When the re-execution fails the run goes on with glibc's defaults.
 void tune_allocator(char** argv);
 
+/// The path of the running binary (/proc/self/exe), or "" when it cannot be read.
+std::string executable_path();
+
 /// GLIBC_TUNABLES as this process sees it ("" when unset): report.json records it under "allocator".
 std::string allocator_tunables();
 

@@ -5,7 +5,6 @@
 #include <unistd.h>
 
 #include <cerrno>
-#include <climits>
 #include <cstdio>
 #include <cstring>
 #include <string>
@@ -13,13 +12,11 @@
 #include "app/allocator.h"
 
 int main(int /*argc*/, char** argv) {
-  char self[PATH_MAX];
-  const ssize_t length = ::readlink("/proc/self/exe", self, sizeof(self) - 1);
-  if (length <= 0) {
+  const std::string path = morphmap::executable_path();
+  if (path.empty()) {
     std::fprintf(stderr, "morphmap: cannot find its own path (/proc/self/exe: %s)\n", std::strerror(errno));
     return 127;
   }
-  const std::string path(self, std::size_t(length));
   const std::string program = path.substr(0, path.rfind('/') + 1) + "morphmap-run";
   std::string previous;
   morphmap::set_allocator_tunables(previous);
