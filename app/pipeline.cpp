@@ -381,17 +381,23 @@ PipelineResult run_pipeline(const PipelineOptions& options) {
   const SharedStars stars = std::make_shared<const VertexTets>(build_vertex_tets(mesh.T, mesh.vertex_count()));
   seconds["stars"] = seconds_since(start);
 
-  const QualityResult quality = measure_quality(mesh, {}, stars);
-  seconds["quality"] = quality.seconds;
-  progress.stage("quality", quality.seconds);
-
+  // The quality stage reads the Laplace stage's local stiffness (quality_from_stiffness) where there is one: on
+  // cow -> horse that took it from 0.19-0.26 s to about 0.05 s.
   const bool closest_point = options.method == "closest-point";
+  QualityResult quality;
   LaplaceResult laplace;
   if (!closest_point) {
-    laplace = solve_harmonic(mesh, options.laplace, stars);
-    seconds["laplace"] = laplace.seconds;
+    LaplaceOptions laplace_options = options.laplace;
+    laplace_options.measure_quality = true;
+    laplace = solve_harmonic(mesh, laplace_options, stars);
+    quality = std::move(laplace.quality);
+    seconds["quality"] = quality.seconds;
+    seconds["laplace"] = laplace.seconds - quality.seconds;
     progress.stage("laplace", laplace.seconds);
   } else {
+    quality = measure_quality(mesh, {}, stars);
+    seconds["quality"] = quality.seconds;
+    progress.stage("quality", quality.seconds);
     laplace.s = Eigen::VectorXd::Zero(mesh.vertex_count());
   }
 

@@ -166,11 +166,12 @@ struct ChunkEdges {
   double abs_sum = 0.0;
 };
 
-}  // namespace
-
-QualityResult measure_quality(const TetMesh4& mesh, const QualityOptions& options, const SharedStars& stars) {
-  const auto start = Clock::now();
-  check_input(mesh, options);
+/// measure_quality over a source of per-tet figures: measure(t, floor, cosines) returns the tet's 3-volume (0 when it
+/// is rounding noise) and, when that exceeds floor, writes the cosines of its six dihedrals (kEdge order); edge(t, e)
+/// is its stiffness vol * grad(lambda_i) . grad(lambda_j) on edge e, read only for tets measured above the final floor.
+template <class Measure, class Edge>
+QualityResult measure_with(const TetMesh4& mesh, const QualityOptions& options, const SharedStars& stars,
+                           Clock::time_point start, Measure&& measure, Edge&& edge) {
   const Points4& V = mesh.V;
   const TetIndices& T = mesh.T;
   const Eigen::Index tets = T.rows();
@@ -185,18 +186,12 @@ QualityResult measure_quality(const TetMesh4& mesh, const QualityOptions& option
     return result;
   }
 
-  // One pass over the tets: hull coordinates, volume, angles, histogram and the six edge stiffnesses of every tet whose
-  // volume is not rounding noise. Degenerate also means 3-volume <= kDegenerateVolumeRatio * the mean, which is known
-  // only after the pass: the chunks holding such a tet (none on the Table II morphs) are measured again without it.
+  // One pass over the tets: volume, angles and histogram of every tet whose volume is not rounding noise. Degenerate
+  // also means 3-volume <= kDegenerateVolumeRatio * the mean, which is known only after the pass: the chunks holding
+  // such a tet (none on the Table II morphs) are measured again without it.
   const Eigen::Index tet_chunks = (tets + kChunkTets - 1) / kChunkTets;
   std::vector<double> volume(to_size(tets));
   std::vector<ChunkStats> volume_stats(to_size(tet_chunks));
-
-  // Each tet's six edge stiffnesses vol * grad(lambda_i) . grad(lambda_j), in kEdge order, written in tet order
-  // by the angle pass and summed per edge below.
-  // Left uninitialised: only usable tets' entries are written and read, so zeroing them (a serial pass over 48
-  // bytes a tet, 80 MB on cow -> horse) would buy nothing.
-  const std::unique_ptr<double[]> edge_value(new double[to_size(tets) * 6]);
 
   // Angles are classified by cosine against precomputed bin edges, which saves six atan2 per tet; near the
   // classification boundaries (well inside (0, 180)) the cosine is as accurate as the angle.
@@ -205,6 +200,7 @@ QualityResult measure_quality(const TetMesh4& mesh, const QualityOptions& option
   const double obtuse_above = options.obtuse_threshold_degrees + kAngleSlackDegrees;
   const double obtuse_cos =
       obtuse_above >= 180.0 ? -std::numeric_limits<double>::infinity() : std::cos(obtuse_above * (kPi / 180.0));
+  const double right_angle_cos = std::sin(kAngleSlackDegrees * (kPi / 180.0));
   std::vector<ChunkAngles> angle_stats(to_size(tet_chunks));
   std::vector<std::int64_t> chunk_histogram(to_size(tet_chunks) * std::size_t(bins), 0);
   // Measures chunk `chunk` (its angle statistics from scratch) over the tets with volume above `floor`.
@@ -214,19 +210,14 @@ QualityResult measure_quality(const TetMesh4& mesh, const QualityOptions& option
     std::int64_t* histogram = chunk_histogram.data() + to_size(chunk) * std::size_t(bins);
     std::fill(histogram, histogram + bins, std::int64_t(0));
     const Eigen::Index end = std::min(tets, (chunk + 1) * kChunkTets);
-    Eigen::Vector3d w[4];
+    double cosines[6];
     for (Eigen::Index t = chunk * kChunkTets; t < end; ++t) {
-      const Eigen::Matrix3d R = hull_coordinates(V, T, t);
-      volume[to_size(t)] = measurable_volume(R);
+      volume[to_size(t)] = measure(t, floor, cosines);
       if (!(volume[to_size(t)] > floor)) continue;
-      scaled_gradients(R, w);
       ++s.measured_tets;
-      const double inverse_norm[4] = {1.0 / w[0].norm(), 1.0 / w[1].norm(), 1.0 / w[2].norm(), 1.0 / w[3].norm()};
-      // vol * grad_i . grad_j = (|det| / 6) * (w_i . w_j) / det^2.
-      const double stiffness_scale = 1.0 / (6.0 * std::abs(hull_determinant(R)));
       for (int e = 0; e < 6; ++e) {
-        const int k = kOpposite[e][0], l = kOpposite[e][1];
-        const double c = -w[k].dot(w[l]) * inverse_norm[k] * inverse_norm[l];  // cosine of the dihedral at e
+        // An exact right angle (lattice tets have many) is binned as 90 degrees, not by its rounding noise.
+        const double c = std::abs(cosines[e]) < right_angle_cos ? 0.0 : cosines[e];
         if (c < s.smallest_cos) {
           s.smallest_cos = c;
           s.largest_tet = t;
@@ -239,7 +230,6 @@ QualityResult measure_quality(const TetMesh4& mesh, const QualityOptions& option
         }
         s.obtuse += c < obtuse_cos ? 1 : 0;
         histogram[bin_of(bin_edge_cos.data(), bins - 1, c)] += 1;
-        edge_value[to_size(t) * 6 + std::size_t(e)] = w[kEdge[e][0]].dot(w[kEdge[e][1]]) * stiffness_scale;
       }
     }
     ChunkStats& v = volume_stats[to_size(chunk)];
@@ -322,7 +312,7 @@ QualityResult measure_quality(const TetMesh4& mesh, const QualityOptions& option
           const int vi = T(t, kEdge[e][0]), vj = T(t, kEdge[e][1]);
           const int b = vi == a ? vj : vj == a ? vi : -1;
           if (b <= a) continue;  // not an edge of a, or one that row b's smaller end sums
-          const double value = edge_value[std::size_t(t) * 6 + std::size_t(e)];
+          const double value = edge(t, e);
           int& slot = w.slot[std::size_t(b)];
           if (slot < 0) {
             slot = int(w.row.size());
@@ -359,6 +349,65 @@ QualityResult measure_quality(const TetMesh4& mesh, const QualityOptions& option
   }
   result.seconds = std::chrono::duration<double>(Clock::now() - start).count();
   return result;
+}
+
+}  // namespace
+
+QualityResult measure_quality(const TetMesh4& mesh, const QualityOptions& options, const SharedStars& stars) {
+  const auto start = Clock::now();
+  check_input(mesh, options);
+  // Each tet's six edge stiffnesses vol * grad(lambda_i) . grad(lambda_j), in kEdge order, written in tet order
+  // by the angle pass and summed per edge. Left uninitialised: only usable tets' entries are written and read, so
+  // zeroing them (a serial pass over 48 bytes a tet, 80 MB on cow -> horse) would buy nothing.
+  const std::unique_ptr<double[]> edge_value(new double[to_size(mesh.T.rows()) * 6]);
+  auto measure = [&](Eigen::Index t, double floor, double* cosines) {
+    const Eigen::Matrix3d R = hull_coordinates(mesh.V, mesh.T, t);
+    const double volume = measurable_volume(R);
+    if (!(volume > floor)) return volume;
+    Eigen::Vector3d w[4];
+    scaled_gradients(R, w);
+    const double inverse_norm[4] = {1.0 / w[0].norm(), 1.0 / w[1].norm(), 1.0 / w[2].norm(), 1.0 / w[3].norm()};
+    // vol * grad_i . grad_j = (|det| / 6) * (w_i . w_j) / det^2.
+    const double stiffness_scale = 1.0 / (6.0 * std::abs(hull_determinant(R)));
+    for (int e = 0; e < 6; ++e) {
+      const int k = kOpposite[e][0], l = kOpposite[e][1];
+      cosines[e] = -w[k].dot(w[l]) * inverse_norm[k] * inverse_norm[l];
+      edge_value[to_size(t) * 6 + std::size_t(e)] = w[kEdge[e][0]].dot(w[kEdge[e][1]]) * stiffness_scale;
+    }
+    return volume;
+  };
+  auto edge = [&](Eigen::Index t, int e) { return edge_value[to_size(t) * 6 + std::size_t(e)]; };
+  return measure_with(mesh, options, stars, start, measure, edge);
+}
+
+QualityResult quality_from_stiffness(const TetMesh4& mesh, const PackedStiffness& stiffness,
+                                     const Eigen::VectorXd& volume, const QualityOptions& options,
+                                     const SharedStars& stars) {
+  const auto start = Clock::now();
+  check_input(mesh, options);
+  if (stiffness.rows() != mesh.T.rows() || volume.size() != mesh.T.rows()) {
+    std::ostringstream msg;
+    msg << "quality_from_stiffness: " << stiffness.rows() << " stiffness rows and " << volume.size() << " volumes for "
+        << mesh.T.rows() << " tets";
+    throw InvalidInput(msg.str());
+  }
+  constexpr int kPacked[4][4] = {{0, 1, 2, 3}, {1, 4, 5, 6}, {2, 5, 7, 8}, {3, 6, 8, 9}};
+  // The gradients' dot products are the stiffness over the volume, which cancels in the cosine:
+  // cos(dihedral at e) = -g_k . g_l / (|g_k| |g_l|) = -K_kl / sqrt(K_kk K_ll) for the opposite edge (k, l).
+  auto measure = [&](Eigen::Index t, double floor, double* cosines) {
+    const double v = volume(t);
+    if (!(v > floor)) return v;
+    const auto K = stiffness.row(t);
+    const double inverse_norm[4] = {1.0 / std::sqrt(K(kPacked[0][0])), 1.0 / std::sqrt(K(kPacked[1][1])),
+                                    1.0 / std::sqrt(K(kPacked[2][2])), 1.0 / std::sqrt(K(kPacked[3][3]))};
+    for (int e = 0; e < 6; ++e) {
+      const int k = kOpposite[e][0], l = kOpposite[e][1];
+      cosines[e] = -K(kPacked[k][l]) * inverse_norm[k] * inverse_norm[l];
+    }
+    return v;
+  };
+  auto edge = [&](Eigen::Index t, int e) { return stiffness(t, kPacked[kEdge[e][0]][kEdge[e][1]]); };
+  return measure_with(mesh, options, stars, start, measure, edge);
 }
 
 }  // namespace morphmap

@@ -4,6 +4,7 @@
 // distance-field morph (DFM, §9) produces more of them. This stage measures how many there are.
 #pragma once
 
+#include <Eigen/Core>
 #include <cstdint>
 #include <vector>
 
@@ -53,5 +54,20 @@ struct QualityResult {
 /// `stars`: the mesh's vertex stars when the caller has them (built here otherwise).
 QualityResult measure_quality(const TetMesh4& mesh, const QualityOptions& options = {},
                               const SharedStars& stars = nullptr);
+
+/// The P1 stiffness of every tet, vol * grad(lambda_i) . grad(lambda_j): #T by 10, the upper triangle of the 4 by 4
+/// local matrix row by row, (0,0) (0,1) (0,2) (0,3) (1,1) (1,2) (1,3) (2,2) (2,3) (3,3).
+using PackedStiffness = Eigen::Matrix<double, Eigen::Dynamic, 10, Eigen::RowMajor>;
+
+/// measure_quality's figures from the stiffness the Laplace stage computes anyway (solve_harmonic with
+/// LaplaceOptions::measure_quality), with no second pass over the tets' geometry: the dihedral at edge e has cosine
+/// -K_kl / sqrt(K_kk K_ll) for the opposite edge (k, l), and the edge sums are K's. `volume` (#T) is 0 for the tets
+/// the Laplace stage leaves out (tet_frame: det E^T E at rounding level), which with the mean test are
+/// degenerate_tets here. The Gram matrix squares a sliver's condition number, so its cosines are less accurate than
+/// measure_quality's QR ones; both report the extremes from QR and atan2. On cow -> horse (1.66 M tets) the two agree
+/// on every count (tests/mesh/quality_test.cpp checks it on an extracted morph).
+QualityResult quality_from_stiffness(const TetMesh4& mesh, const PackedStiffness& stiffness,
+                                     const Eigen::VectorXd& volume, const QualityOptions& options = {},
+                                     const SharedStars& stars = nullptr);
 
 }  // namespace morphmap

@@ -18,6 +18,7 @@
 
 #include "mesh/adjacency.h"
 #include "mesh/errors.h"
+#include "mesh/quality.h"
 #include "mesh/stopwatch.h"
 
 namespace morphmap {
@@ -32,7 +33,7 @@ constexpr double kDegenerateGramRatio = 1e-14;
 // thread count (each row is summed by one task in incident-tet order anyway).
 constexpr Eigen::Index kBlockRows = 2048;
 
-// Packed index of the symmetric 4x4 local stiffness entry (i, j).
+// Packed index of the symmetric 4x4 local stiffness entry (i, j) (PackedStiffness's order).
 constexpr int kPacked[4][4] = {{0, 1, 2, 3}, {1, 4, 5, 6}, {2, 5, 7, 8}, {3, 6, 8, 9}};
 
 void check_mesh_arrays(const Points4& V, const TetIndices& T, const char* who) {
@@ -53,8 +54,7 @@ void check_mesh_arrays(const Points4& V, const TetIndices& T, const char* who) {
 
 /// The 10 distinct entries vol * grad_i . grad_j of every tet's local stiffness (#T by 10, see kPacked) and its
 /// volume (0 for a degenerate tet, whose entries are then 0).
-void local_stiffness(const Points4& V, const TetIndices& T,
-                     Eigen::Matrix<double, Eigen::Dynamic, 10, Eigen::RowMajor>& L, Eigen::VectorXd& vol) {
+void local_stiffness(const Points4& V, const TetIndices& T, PackedStiffness& L, Eigen::VectorXd& vol) {
   const Eigen::Index tets = T.rows();
   L.resize(tets, 10);
   vol.resize(tets);
@@ -88,8 +88,7 @@ void local_stiffness(const Points4& V, const TetIndices& T,
 /// Eigen's setFromTriplets is sequential and needs a 16-entry triplet per tet (256 bytes a tet); here every row
 /// is one task: it walks its vertex's star (tets with stiffness, in tet order), so each entry is summed in the same
 /// order whatever the thread count, and (i, j) and (j, i) add the same doubles in the same order.
-void assemble_rows(const TetIndices& T, const VertexTets& stars,
-                   const Eigen::Matrix<double, Eigen::Dynamic, 10, Eigen::RowMajor>& L, const Eigen::VectorXd& vol,
+void assemble_rows(const TetIndices& T, const VertexTets& stars, const PackedStiffness& L, const Eigen::VectorXd& vol,
                    const std::vector<int>& unknown, int unknowns, const Eigen::VectorXd* s, SparseMatrixD& A,
                    Eigen::VectorXd* b) {
   const Eigen::Index n = static_cast<Eigen::Index>(unknown.size());
@@ -213,7 +212,7 @@ void barycentric_gradients(const Points4& V, const TetIndices& T, Eigen::MatrixX
 
 SparseMatrixD cotangent_stiffness(const Points4& V, const TetIndices& T) {
   check_mesh_arrays(V, T, "cotangent_stiffness");
-  Eigen::Matrix<double, Eigen::Dynamic, 10, Eigen::RowMajor> L;
+  PackedStiffness L;
   Eigen::VectorXd vol;
   local_stiffness(V, T, L, vol);
   std::vector<int> all(static_cast<std::size_t>(V.rows()));
@@ -223,7 +222,7 @@ SparseMatrixD cotangent_stiffness(const Points4& V, const TetIndices& T) {
   return K;
 }
 
-DirichletSystem dirichlet_system(const TetMesh4& mesh, const SharedStars& stars) {
+DirichletSystem dirichlet_system(const TetMesh4& mesh, const SharedStars& stars, QualityResult* quality) {
   const Points4& V = mesh.V;
   const TetIndices& T = mesh.T;
   const Eigen::Index n = V.rows();
@@ -239,10 +238,16 @@ DirichletSystem dirichlet_system(const TetMesh4& mesh, const SharedStars& stars)
 
   DirichletSystem system;
   const auto assemble_start = Clock::now();
-  Eigen::Matrix<double, Eigen::Dynamic, 10, Eigen::RowMajor> L;
+  PackedStiffness L;
   Eigen::VectorXd vol;
   local_stiffness(V, T, L, vol);
   system.degenerate_tets = (vol.array() <= 0.0).count();
+  // Timed apart from the assembly: it is the quality stage's work, done here while the stiffness exists.
+  double quality_seconds = 0.0;
+  if (quality != nullptr) {
+    *quality = quality_from_stiffness(mesh, L, vol, {}, stars_or_build(stars, T, n));
+    quality_seconds = quality->seconds;
+  }
 
   // Components through tets that carry stiffness only: a vertex held by degenerate tets alone would have
   // an empty row in K, so it must count as its own (floating) component.
@@ -292,7 +297,7 @@ DirichletSystem dirichlet_system(const TetMesh4& mesh, const SharedStars& stars)
     if (uj >= 0) system.x0(uj) = mesh.time_of(j);
   }
   assemble_rows(T, *stars_or_build(stars, T, n), L, vol, system.unknown, unknowns, &system.s, system.A, &system.b);
-  system.assemble_seconds = seconds_since(assemble_start);
+  system.assemble_seconds = seconds_since(assemble_start) - quality_seconds;
   return system;
 }
 
@@ -300,9 +305,9 @@ LaplaceResult solve_harmonic(const TetMesh4& mesh, const LaplaceOptions& options
   const auto start = Clock::now();
   // Before the expensive part, so a typo in the backend name fails fast.
   std::unique_ptr<LinearSolver> solver = make_solver(options.solver, options.solve);
-  DirichletSystem system = dirichlet_system(mesh, stars);
-
   LaplaceResult result;
+  DirichletSystem system = dirichlet_system(mesh, stars, options.measure_quality ? &result.quality : nullptr);
+
   result.assemble_seconds = system.assemble_seconds;
   result.degenerate_tets = system.degenerate_tets;
   result.floating_components = system.floating_components;

@@ -8,6 +8,7 @@
 #include <vector>
 
 #include "mesh/adjacency.h"
+#include "mesh/quality.h"
 #include "mesh/tet_mesh4.h"
 #include "solver/linear_solver.h"
 
@@ -40,6 +41,10 @@ struct LaplaceOptions {
                                   ///< gauss-seidel, 10-24x than cholmod
   SolveOptions solve;             ///< tolerance, iteration limit and (gauss-seidel) change threshold
   bool warm_start = true;  ///< iterative backends (cg, cg-ic, cg-amg, gauss-seidel, auto) start from s = t instead of 0
+  /// Also measure the mesh quality (LaplaceResult::quality) from the local stiffness, which the assembly computes
+  /// anyway (quality_from_stiffness): on cow -> horse 0.05 s instead of measure_quality's own pass over the tets'
+  /// geometry.
+  bool measure_quality = false;
 };
 
 /// The Dirichlet problem of solve_harmonic as one linear system A x = b over the unknowns: the interior vertices
@@ -57,9 +62,11 @@ struct DirichletSystem {
 };
 
 /// Assembles the system solve_harmonic solves (it calls this), for benchmarks and external solvers. `stars`: the
-/// mesh's vertex stars when the caller has them (built here otherwise). Throws InvalidInput for inconsistent mesh
-/// arrays.
-DirichletSystem dirichlet_system(const TetMesh4& mesh, const SharedStars& stars = nullptr);
+/// mesh's vertex stars when the caller has them (built here otherwise). `quality`, when given, receives
+/// quality_from_stiffness of the local stiffness (its seconds are not in assemble_seconds). Throws InvalidInput for
+/// inconsistent mesh arrays.
+DirichletSystem dirichlet_system(const TetMesh4& mesh, const SharedStars& stars = nullptr,
+                                 QualityResult* quality = nullptr);
 
 struct LaplaceResult {
   Eigen::VectorXd s;                     ///< #V harmonic field, 0 on A, 1 on B
@@ -69,7 +76,8 @@ struct LaplaceResult {
   std::int64_t floating_vertices = 0;
   std::int64_t degenerate_tets = 0;  ///< zero-volume tets left out of the operator (see tet_frame)
   double assemble_seconds = 0.0;
-  double seconds = 0.0;  ///< whole stage
+  QualityResult quality;  ///< with LaplaceOptions::measure_quality (its seconds are part of `seconds`)
+  double seconds = 0.0;   ///< whole stage
 };
 
 /// Solves the Dirichlet problem. Components with no boundary vertex would make the system singular:

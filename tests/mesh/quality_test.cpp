@@ -83,8 +83,8 @@ TEST(QualityRightCorner, ThreeRightAnglesAndThreeOfAcosInverseSqrt3) {
   const double small = degrees(std::acos(1.0 / std::sqrt(3.0)));  // 54.74, at the edges of the slanted face
   EXPECT_NEAR(r.min_dihedral_degrees, small, 1e-9);
   EXPECT_NEAR(r.max_dihedral_degrees, 90.0, 1e-9);
-  EXPECT_EQ(r.dihedral_histogram[5], 3);                               // [50, 60)
-  EXPECT_EQ(r.dihedral_histogram[8] + r.dihedral_histogram[9], 3);     // 90 sits on a bin boundary
+  EXPECT_EQ(r.dihedral_histogram[5], 3);                            // [50, 60)
+  EXPECT_EQ(r.dihedral_histogram[8] + r.dihedral_histogram[9], 3);  // 90 sits on a bin boundary
   EXPECT_EQ(histogram_total(r), 6);
   // The right angles are exactly at the default threshold and must not count as obtuse.
   EXPECT_EQ(r.obtuse_dihedrals, 0);
@@ -191,9 +191,9 @@ TEST(QualityKuhnCube, ShearedCubeHasThreeNegativeWeightsOfNineteen) {
 
 TEST(QualityDegenerate, FlatTetIsCountedAndLeftOutWithoutNaN) {
   // A regular tet plus a flat square (four coplanar points): the flat one has no hull to measure.
-  const TetMesh4 mesh = embedded_mesh(
-      {{1, 1, 1}, {1, -1, -1}, {-1, 1, -1}, {-1, -1, 1}, {3, 0, 0}, {4, 0, 0}, {3, 1, 0}, {4, 1, 0}},
-      {{0, 1, 2, 3}, {4, 5, 6, 7}}, 23);
+  const TetMesh4 mesh =
+      embedded_mesh({{1, 1, 1}, {1, -1, -1}, {-1, 1, -1}, {-1, -1, 1}, {3, 0, 0}, {4, 0, 0}, {3, 1, 0}, {4, 1, 0}},
+                    {{0, 1, 2, 3}, {4, 5, 6, 7}}, 23);
   const QualityResult r = measure_quality(mesh);
   EXPECT_EQ(r.tets, 2);
   EXPECT_EQ(r.degenerate_tets, 1);
@@ -315,6 +315,39 @@ TEST(QualityExtracted, SameResultForOneAndTwoThreadsAndAgreesWithLaplaceOperator
   EXPECT_EQ(one.edges, edges);
   EXPECT_NEAR(double(one.negative_cotangent_edges), double(positive), 0.0005 * double(positive) + 2);
   EXPECT_GT(one.negative_cotangent_edges, 0);
+}
+
+// The pipeline's quality stage reads the Laplace stage's local stiffness instead of measuring the geometry again:
+// the same counts on an extracted morph (its slivers included), whatever the thread count.
+TEST(QualityExtracted, FromStiffnessAgreesWithMeasureQuality) {
+  const TetMesh4 mesh = extracted_mesh();
+  const QualityResult reference = measure_quality(mesh);
+  QualityResult one, two;
+  {
+    tbb::global_control limit(tbb::global_control::max_allowed_parallelism, 1);
+    dirichlet_system(mesh, nullptr, &one);
+  }
+  {
+    tbb::global_control limit(tbb::global_control::max_allowed_parallelism, 2);
+    dirichlet_system(mesh, nullptr, &two);
+  }
+  EXPECT_EQ(one.dihedral_histogram, two.dihedral_histogram);
+  EXPECT_EQ(one.negative_cotangent_edges, two.negative_cotangent_edges);
+  EXPECT_EQ(one.min_dihedral_degrees, two.min_dihedral_degrees);
+  EXPECT_EQ(one.tets, reference.tets);
+  EXPECT_EQ(one.degenerate_tets, reference.degenerate_tets);
+  EXPECT_EQ(one.edges, reference.edges);
+  EXPECT_EQ(one.negative_cotangent_edges, reference.negative_cotangent_edges);
+  EXPECT_EQ(one.obtuse_dihedrals, reference.obtuse_dihedrals);
+  EXPECT_EQ(one.dihedral_histogram, reference.dihedral_histogram);
+  EXPECT_NEAR(one.min_dihedral_degrees, reference.min_dihedral_degrees, 1e-9);
+  EXPECT_NEAR(one.max_dihedral_degrees, reference.max_dihedral_degrees, 1e-9);
+  EXPECT_NEAR(one.min_volume_ratio, reference.min_volume_ratio, 1e-12);
+  EXPECT_GT(one.negative_cotangent_edges, 0);
+  EXPECT_GT(one.dihedral_histogram[std::size_t(one.dihedral_histogram.size() / 2)], 0);  // right angles, 90 degrees
+
+  PackedStiffness short_stiffness(mesh.tet_count() - 1, 10);
+  EXPECT_THROW(quality_from_stiffness(mesh, short_stiffness, Eigen::VectorXd::Ones(mesh.tet_count())), InvalidInput);
 }
 
 }  // namespace
