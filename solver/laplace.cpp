@@ -134,7 +134,8 @@ void assemble_rows(const TetIndices& T, const VertexTets& stars, const PackedSti
       }
     }
     for (const auto& e : w.row) w.slot[static_cast<std::size_t>(e.first)] = -1;
-    std::sort(w.row.begin(), w.row.end(), [](const auto& x, const auto& y) { return x.first < y.first; });
+    // The counting pass needs only the row's length.
+    if (values) std::sort(w.row.begin(), w.row.end(), [](const auto& x, const auto& y) { return x.first < y.first; });
     return rhs;
   };
 
