@@ -391,7 +391,7 @@ QualityResult quality_from_stiffness(const TetMesh4& mesh, const PackedStiffness
         << mesh.T.rows() << " tets";
     throw InvalidInput(msg.str());
   }
-  constexpr int kPacked[4][4] = {{0, 1, 2, 3}, {1, 4, 5, 6}, {2, 5, 7, 8}, {3, 6, 8, 9}};
+  const auto& kPacked = kPackedStiffnessColumn;
   // The gradients' dot products are the stiffness over the volume, which cancels in the cosine:
   // cos(dihedral at e) = -g_k . g_l / (|g_k| |g_l|) = -K_kl / sqrt(K_kk K_ll) for the opposite edge (k, l).
   auto measure = [&](Eigen::Index t, double floor, double* cosines) {

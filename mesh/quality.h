@@ -59,6 +59,9 @@ QualityResult measure_quality(const TetMesh4& mesh, const QualityOptions& option
 /// local matrix row by row, (0,0) (0,1) (0,2) (0,3) (1,1) (1,2) (1,3) (2,2) (2,3) (3,3).
 using PackedStiffness = Eigen::Matrix<double, Eigen::Dynamic, 10, Eigen::RowMajor>;
 
+/// Column of PackedStiffness holding the local entry (i, j) (and (j, i)).
+inline constexpr int kPackedStiffnessColumn[4][4] = {{0, 1, 2, 3}, {1, 4, 5, 6}, {2, 5, 7, 8}, {3, 6, 8, 9}};
+
 /// measure_quality's figures from the stiffness the Laplace stage computes anyway (solve_harmonic with
 /// LaplaceOptions::measure_quality), with no second pass over the tets' geometry: the dihedral at edge e has cosine
 /// -K_kl / sqrt(K_kk K_ll) for the opposite edge (k, l), and the edge sums are K's. `volume` (#T) is 0 for the tets

@@ -33,8 +33,8 @@ constexpr double kDegenerateGramRatio = 1e-14;
 // thread count (each row is summed by one task in incident-tet order anyway).
 constexpr Eigen::Index kBlockRows = 2048;
 
-// Packed index of the symmetric 4x4 local stiffness entry (i, j) (PackedStiffness's order).
-constexpr int kPacked[4][4] = {{0, 1, 2, 3}, {1, 4, 5, 6}, {2, 5, 7, 8}, {3, 6, 8, 9}};
+// Packed index of the symmetric 4x4 local stiffness entry (i, j).
+constexpr const auto& kPacked = kPackedStiffnessColumn;
 
 void check_mesh_arrays(const Points4& V, const TetIndices& T, const char* who) {
   if (V.cols() != 4) {
@@ -243,10 +243,11 @@ DirichletSystem dirichlet_system(const TetMesh4& mesh, const SharedStars& stars,
   Eigen::VectorXd vol;
   local_stiffness(V, T, L, vol);
   system.degenerate_tets = (vol.array() <= 0.0).count();
+  const SharedStars shared_stars = stars_or_build(stars, T, n);  // built once for the quality pass and the rows
   // Timed apart from the assembly: it is the quality stage's work, done here while the stiffness exists.
   double quality_seconds = 0.0;
   if (quality != nullptr) {
-    *quality = quality_from_stiffness(mesh, L, vol, {}, stars_or_build(stars, T, n));
+    *quality = quality_from_stiffness(mesh, L, vol, {}, shared_stars);
     quality_seconds = quality->seconds;
   }
 
@@ -297,7 +298,7 @@ DirichletSystem dirichlet_system(const TetMesh4& mesh, const SharedStars& stars,
     const int uj = system.unknown[static_cast<std::size_t>(j)];
     if (uj >= 0) system.x0(uj) = mesh.time_of(j);
   }
-  assemble_rows(T, *stars_or_build(stars, T, n), L, vol, system.unknown, unknowns, &system.s, system.A, &system.b);
+  assemble_rows(T, *shared_stars, L, vol, system.unknown, unknowns, &system.s, system.A, &system.b);
   system.assemble_seconds = seconds_since(assemble_start) - quality_seconds;
   return system;
 }
