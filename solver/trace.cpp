@@ -417,6 +417,10 @@ class Tracer {
   // star lists only: testing each tet of one star against the others' vertices read a random row of T per tet).
   void star_intersection(const std::array<int, 4>& ids, int n, std::vector<int>& out) const {
     out.clear();
+    if (n == 3) {
+      face_star_intersection(ids, out);
+      return;
+    }
     std::array<std::int64_t, 4> at{}, end{};
     int scan = 0;  // the support vertex with the fewest tets
     for (int k = 0; k < n; ++k) {
@@ -434,6 +438,36 @@ class Tracer {
         all = i < end[std::size_t(k)] && adj_.tet(i) == t;
       }
       if (all) out.push_back(t);
+    }
+  }
+
+  // star_intersection of a face (the common case: every piece through a tet ends on one), with the three list
+  // cursors in registers: the general loop kept them in an indexed array, stored back at every step, and took a
+  // fifth of the tracer's instructions on sphere -> torus. Same walk, same result.
+  void face_star_intersection(const std::array<int, 4>& ids, std::vector<int>& out) const {
+    std::array<const int*, 3> begin{}, end{};
+    for (int k = 0; k < 3; ++k) {
+      begin[std::size_t(k)] = adj_.tets.data() + adj_.first(ids[std::size_t(k)]);
+      end[std::size_t(k)] = adj_.tets.data() + adj_.last(ids[std::size_t(k)]);
+    }
+    // The shortest star drives the walk; the other two are advanced to each of its tets.
+    int scan = 0;
+    for (int k = 1; k < 3; ++k)
+      if (end[std::size_t(k)] - begin[std::size_t(k)] < end[std::size_t(scan)] - begin[std::size_t(scan)]) scan = k;
+    const int* s = begin[std::size_t(scan)];
+    const int* const s_end = end[std::size_t(scan)];
+    const int* p = begin[std::size_t(scan == 0 ? 1 : 0)];
+    const int* const p_end = end[std::size_t(scan == 0 ? 1 : 0)];
+    const int* q = begin[std::size_t(scan == 2 ? 1 : 2)];
+    const int* const q_end = end[std::size_t(scan == 2 ? 1 : 2)];
+    for (; s != s_end; ++s) {
+      const int t = *s;
+      while (p != p_end && *p < t) ++p;
+      if (p == p_end) return;
+      if (*p != t) continue;
+      while (q != q_end && *q < t) ++q;
+      if (q == q_end) return;
+      if (*q == t) out.push_back(t);
     }
   }
 
