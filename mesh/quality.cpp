@@ -391,22 +391,26 @@ QualityResult quality_from_stiffness(const TetMesh4& mesh, const PackedStiffness
         << mesh.T.rows() << " tets";
     throw InvalidInput(msg.str());
   }
-  const auto& kPacked = kPackedStiffnessColumn;
   // The gradients' dot products are the stiffness over the volume, which cancels in the cosine:
   // cos(dihedral at e) = -g_k . g_l / (|g_k| |g_l|) = -K_kl / sqrt(K_kk K_ll) for the opposite edge (k, l).
   auto measure = [&](Eigen::Index t, double floor, double* cosines) {
     const double v = volume(t);
     if (!(v > floor)) return v;
-    const auto K = stiffness.row(t);
-    const double inverse_norm[4] = {1.0 / std::sqrt(K(kPacked[0][0])), 1.0 / std::sqrt(K(kPacked[1][1])),
-                                    1.0 / std::sqrt(K(kPacked[2][2])), 1.0 / std::sqrt(K(kPacked[3][3]))};
+    double K[4][4];
+    unpack_stiffness(stiffness.row(t).data(), K);
+    const double inverse_norm[4] = {1.0 / std::sqrt(K[0][0]), 1.0 / std::sqrt(K[1][1]), 1.0 / std::sqrt(K[2][2]),
+                                    1.0 / std::sqrt(K[3][3])};
     for (int e = 0; e < 6; ++e) {
       const int k = kOpposite[e][0], l = kOpposite[e][1];
-      cosines[e] = -K(kPacked[k][l]) * inverse_norm[k] * inverse_norm[l];
+      cosines[e] = -K[k][l] * inverse_norm[k] * inverse_norm[l];
     }
     return v;
   };
-  auto edge = [&](Eigen::Index t, int e) { return stiffness(t, kPacked[kEdge[e][0]][kEdge[e][1]]); };
+  auto edge = [&](Eigen::Index t, int e) {
+    double K[4][4];
+    unpack_stiffness(stiffness.row(t).data(), K);
+    return K[kEdge[e][0]][kEdge[e][1]];
+  };
   return measure_with(mesh, options, stars, start, measure, edge);
 }
 

@@ -34,7 +34,6 @@ constexpr double kDegenerateGramRatio = 1e-14;
 constexpr Eigen::Index kBlockRows = 2048;
 
 // Packed index of the symmetric 4x4 local stiffness entry (i, j).
-constexpr const auto& kPacked = kPackedStiffnessColumn;
 
 void check_mesh_arrays(const Points4& V, const TetIndices& T, const char* who) {
   if (V.cols() != 4) {
@@ -52,11 +51,11 @@ void check_mesh_arrays(const Points4& V, const TetIndices& T, const char* who) {
   }
 }
 
-/// The 10 distinct entries vol * grad_i . grad_j of every tet's local stiffness (#T by 10, see kPacked) and its
-/// volume (0 for a degenerate tet, whose entries are then 0).
+/// Every tet's local stiffness vol * grad_i . grad_j, packed (#T by 6, see PackedStiffness), and its volume (0 for a
+/// degenerate tet, whose entries are then 0).
 void local_stiffness(const Points4& V, const TetIndices& T, PackedStiffness& L, Eigen::VectorXd& vol) {
   const Eigen::Index tets = T.rows();
-  L.resize(tets, 10);
+  L.resize(tets, 6);
   vol.resize(tets);
   tbb::parallel_for(tbb::blocked_range<Eigen::Index>(0, tets, 4096), [&](const tbb::blocked_range<Eigen::Index>& r) {
     for (Eigen::Index t = r.begin(); t != r.end(); ++t) {
@@ -68,15 +67,15 @@ void local_stiffness(const Points4& V, const TetIndices& T, PackedStiffness& L, 
         vol(t) = 0.0;
         continue;
       }
-      // Gradients of hats 1..3 are E Gram^-1 e_i, so their dot products are Gram^-1 itself; hat 0's gradient is
-      // minus their sum. The same double serves (i, j) and (j, i): K comes out bitwise symmetric.
+      // Gradients of hats 1..3 are E Gram^-1 e_i, so their dot products are Gram^-1 itself (hat 0's, minus their
+      // sum, is what unpack_stiffness derives). Its upper triangle serves (i, j) and (j, i): K is bitwise symmetric.
       const Eigen::Matrix3d& M = gram_inverse;
-      const Eigen::Vector3d row_sum = M.rowwise().sum();
-      L(t, kPacked[0][0]) = volume * row_sum.sum();
-      for (int i = 0; i < 3; ++i) {
-        L(t, kPacked[0][i + 1]) = -volume * row_sum(i);
-        for (int j = i; j < 3; ++j) L(t, kPacked[i + 1][j + 1]) = volume * M(i, j);
-      }
+      L(t, 0) = volume * M(0, 0);
+      L(t, 1) = volume * M(0, 1);
+      L(t, 2) = volume * M(0, 2);
+      L(t, 3) = volume * M(1, 1);
+      L(t, 4) = volume * M(1, 2);
+      L(t, 5) = volume * M(2, 2);
       vol(t) = volume;
     }
   });
@@ -116,10 +115,12 @@ void assemble_rows(const TetIndices& T, const VertexTets& stars, const PackedSti
       if (!(vol(t) > 0.0)) continue;  // degenerate: no stiffness
       int li = 0;
       while (T(t, li) != v) ++li;
+      double K[4][4];
+      if (values) unpack_stiffness(L.row(t).data(), K);
       for (int lj = 0; lj < 4; ++lj) {
         const int col_vertex = T(t, lj);
         const int col = unknown[static_cast<std::size_t>(col_vertex)];
-        const double value = values ? L(t, kPacked[li][lj]) : 0.0;
+        const double value = values ? K[li][lj] : 0.0;
         if (col < 0) {
           if (values && s != nullptr) rhs -= value * (*s)(col_vertex);
           continue;
