@@ -320,7 +320,7 @@ LaplaceResult solve_harmonic(const TetMesh4& mesh, const LaplaceOptions& options
   // Direct backends ignore x; the iterative ones (gauss-seidel included) start from it.
   Eigen::VectorXd x = options.warm_start ? system.x0 : Eigen::VectorXd::Zero(system.A.rows());
   if (result.unknowns > 0) {
-    solver->compute(system.A);
+    solver->compute(std::move(system.A));  // handed over, not copied: A is not needed after this
     result.report = solver->solve(system.b, x);
     for (Eigen::Index i = 0; i < result.s.size(); ++i) {
       const int u = system.unknown[static_cast<std::size_t>(i)];

@@ -232,11 +232,12 @@ double relative_residual(const SparseMatrixD& A, const Eigen::VectorXd& b, const
   return b_norm > 0.0 ? r_norm / b_norm : r_norm;
 }
 
-/// Copies A (compressed) and checks it; the one entry point of every backend's compute.
-Eigen::VectorXd take_matrix(const SparseMatrixD& A, SparseMatrixD& copy, const std::string& backend) {
-  copy = A;
-  copy.makeCompressed();
-  return check_spd_input(copy, backend);
+/// Takes A's storage (A is left empty), compressed, and checks it; the one entry point of every backend's compute.
+Eigen::VectorXd take_matrix(SparseMatrixD& A, SparseMatrixD& own, const std::string& backend) {
+  own = SparseMatrixD();
+  own.swap(A);
+  own.makeCompressed();
+  return check_spd_input(own, backend);
 }
 
 std::string format_number(double value, int digits = 3) {
@@ -276,11 +277,11 @@ class CholmodSolver final : public LinearSolver {
 
   std::string name() const override { return "cholmod"; }
 
-  void compute(const SparseMatrixD& A) override {
+  void compute_taking(SparseMatrixD& A) override {
     const auto start = Clock::now();
     ready_ = false;
     check_spd_input(A, name());
-    analyze_checked(A);
+    analyze_taking(A);
     factorize_analyzed();
     setup_seconds_ = seconds_since(start);
   }
@@ -288,11 +289,18 @@ class CholmodSolver final : public LinearSolver {
   /// Symbolic analysis only (ordering, supernodes, flop count), for a matrix the caller has checked; auto
   /// uses flops() and factor_entries() to estimate the factorisation before paying for it.
   void analyze_checked(const SparseMatrixD& A) {
+    SparseMatrixD copy = A;
+    analyze_taking(copy);
+  }
+
+  /// analyze_checked on A's storage, which it takes (A is left empty).
+  void analyze_taking(SparseMatrixD& A) {
     const auto start = Clock::now();
     ready_ = false;
     free_factor();
     free_lower();
-    A_ = A;
+    A_ = SparseMatrixD();
+    A_.swap(A);
     A_.makeCompressed();
     if (A_.cols() > 0) analyze_lower();
     analyze_seconds_ = seconds_since(start);
@@ -863,7 +871,7 @@ class PcgSolver final : public LinearSolver {
                                                           : "cg-ic";
   }
 
-  void compute(const SparseMatrixD& A) override {
+  void compute_taking(SparseMatrixD& A) override {
     const auto start = Clock::now();
     ready_ = false;
     const Eigen::VectorXd diagonal = take_matrix(A, A_, name());
@@ -1109,7 +1117,7 @@ class GaussSeidelSolver final : public LinearSolver {
 
   std::string name() const override { return "gauss-seidel"; }
 
-  void compute(const SparseMatrixD& A) override {
+  void compute_taking(SparseMatrixD& A) override {
     const auto start = Clock::now();
     ready_ = false;
     inverse_diagonal_ = take_matrix(A, A_, name()).cwiseInverse();
@@ -1186,7 +1194,7 @@ class LdltSolver final : public LinearSolver {
  public:
   std::string name() const override { return "ldlt"; }
 
-  void compute(const SparseMatrixD& A) override {
+  void compute_taking(SparseMatrixD& A) override {
     const auto start = Clock::now();
     ready_ = false;
     take_matrix(A, A_, name());
@@ -1353,7 +1361,7 @@ class AutoSolver final : public LinearSolver {
 
   std::string name() const override { return "auto"; }
 
-  void compute(const SparseMatrixD& A) override {
+  void compute_taking(SparseMatrixD& A) override {
     ready_ = false;
     chosen_.reset();
     diagonal_ = take_matrix(A, A_, name());
