@@ -169,11 +169,11 @@ std::string gib(double bytes) {
 }  // namespace
 
 long long estimate_peak_memory(std::int64_t lattice_points, std::int64_t tets, std::int64_t vertices) {
-  // Fitted to report.json peak_memory_bytes (since the triplet-free assembly) with about 10% to spare: demo
-  // 0.47 GB (2.37M tets, 0.41M vertices), sphere -> bunny 0.49 GB (2.45M, 0.43M), cow -> horse at 160 voxels and
-  // 16 steps 3.79 GB (21.0M, 3.6M, 3.8M lattice points). Per tet: the mesh, the CSC matrix and the per-tet
-  // gradients; per vertex: positions, s, solver vectors, vertex gradients and labels.
-  constexpr double kBase = 80e6, kPerLatticePoint = 12.0, kPerTet = 160.0, kPerVertex = 160.0;
+  // Fitted to report.json peak_memory_bytes (since the local stiffness is packed in 48 bytes a tet) with 9-17% to
+  // spare: demo 0.451 GB (2.37M tets, 0.41M vertices), sphere -> bunny 0.441 GB (2.45M, 0.43M), cow -> horse 0.311
+  // GB (1.66M, 0.30M) and at 160 voxels and 16 steps 3.26 GB (21.0M, 3.6M, 3.8M lattice points). Per tet: the mesh,
+  // the stars, the local stiffness and the CSC matrix; per vertex: positions, s, solver vectors, the field, labels.
+  constexpr double kBase = 80e6, kPerLatticePoint = 12.0, kPerTet = 145.0, kPerVertex = 160.0;
   return (long long)(kBase + kPerLatticePoint * double(lattice_points) + kPerTet * double(tets) +
                      kPerVertex * double(vertices));
 }
