@@ -15,6 +15,7 @@
 #include <Eigen/OrderingMethods>
 #include <Eigen/SparseCholesky>
 #include <algorithm>
+#include <atomic>
 #include <chrono>
 #include <cmath>
 #include <iomanip>
@@ -590,6 +591,7 @@ struct AmgLevel {
   const int* start = nullptr;  // S's pattern: A's own arrays on the finest level, op's below
   const int* col = nullptr;
   std::vector<float> val;                    // S = A D^-1
+  std::vector<std::int16_t> offset;          // col[k] - i for row i's entries k, when every one fits (else empty)
   std::vector<double> scale, inverse_scale;  // D, D^-1 (a multiply per row instead of a division)
   std::vector<int> agg;                      // row -> row of the next coarser level
   std::vector<int> member_start, members;    // row of the next coarser level -> its rows here, in order (set-up)
@@ -597,9 +599,24 @@ struct AmgLevel {
   Eigen::VectorXd b, x, u;                   // right-hand side, solution, D (x + P e)
 };
 
-/// Row i of S times v, with two interleaved partial sums (a row has ~15 entries).
+/// Row i of S times v, with two interleaved partial sums (a row has ~15 entries). Columns are read as 16-bit offsets
+/// from the row where they fit (AmgLevel::offset): each pass over S then moves 6 bytes an entry instead of 8, the same
+/// products in the same order.
 inline double level_row(const AmgLevel& L, int i, const double* v) {
   const float* val = L.val.data();
+  if (!L.offset.empty()) {
+    const std::int16_t* offset = L.offset.data();
+    const double* row = v + i;
+    const int last = L.start[i + 1];
+    double even = 0.0, odd = 0.0;
+    int k = L.start[i];
+    for (; k + 1 < last; k += 2) {
+      even += double(val[k]) * row[offset[k]];
+      odd += double(val[k + 1]) * row[offset[k + 1]];
+    }
+    if (k < last) even += double(val[k]) * row[offset[k]];
+    return even + odd;
+  }
   const int* col = L.col;
   const int last = L.start[i + 1];
   double even = 0.0, odd = 0.0;
@@ -750,6 +767,7 @@ class AggregationMultigrid {
     for (const AmgLevel& L : levels_) {
       bytes +=
           std::int64_t(L.val.size()) * std::int64_t(sizeof(float)) +
+          std::int64_t(L.offset.size()) * std::int64_t(sizeof(std::int16_t)) +
           std::int64_t(L.op.start.size() + L.op.col.size() + L.agg.size() + L.members.size() + L.member_start.size()) *
               kIndexBytes +
           std::int64_t(L.scale.size() + L.inverse_scale.size() + L.b.size() + L.x.size() + L.u.size()) * kDoubleBytes;
@@ -790,6 +808,19 @@ class AggregationMultigrid {
     });
     L.start = A.start;
     L.col = A.col;
+    // The extraction numbers vertices cell by cell, so a row's columns lie within a few slabs of it: on cow -> horse
+    // (260 k unknowns) every offset is below 18700.
+    L.offset.resize(std::size_t(A.start[n]));
+    std::atomic<bool> short_offsets{true};
+    for_row_blocks(n, [&](int begin, int end) {
+      for (int i = begin; i < end; ++i)
+        for (int k = A.start[i]; k < A.start[i + 1]; ++k) {
+          const int offset = A.col[k] - i;
+          if (std::abs(offset) > std::numeric_limits<std::int16_t>::max()) short_offsets = false;
+          L.offset[std::size_t(k)] = std::int16_t(offset);
+        }
+    });
+    if (!short_offsets) L.offset = std::vector<std::int16_t>();
     L.val.resize(std::size_t(A.start[n]));
     for_row_blocks(n, [&](int begin, int end) {
       for (int i = begin; i < end; ++i)

@@ -413,6 +413,40 @@ TEST(LinearSolver, MultigridCutsIterations) {
   EXPECT_NE(reports["cg-amg"].detail.find(", "), std::string::npos) << reports["cg-amg"].detail;
 }
 
+// Levels whose columns lie within 32767 rows of every row read them as 16-bit offsets; a level with a longer
+// coupling keeps the 32-bit columns. Two 40^3 grids joined at every 7th node, 64000 rows apart, take that path at the
+// finest level (a broken fallback, reading those couplings at wrong columns, makes the cycle useless) and still
+// converge like one grid, to cg's solution.
+TEST(LinearSolver, MultigridWithLongCouplings) {
+  const SparseMatrixD G = grid_laplacian(40);
+  const int n = int(G.rows());
+  std::vector<Eigen::Triplet<double, int>> triplets;
+  for (int j = 0; j < n; ++j)
+    for (SparseMatrixD::InnerIterator it(G, j); it; ++it) {
+      triplets.emplace_back(int(it.row()), j, it.value());
+      triplets.emplace_back(int(it.row()) + n, j + n, it.value());
+    }
+  for (int i = 0; i < n; i += 7) {  // weak couplings between the grids, the diagonal raised to keep A an M-matrix
+    triplets.emplace_back(i, i + n, -0.5);
+    triplets.emplace_back(i + n, i, -0.5);
+    triplets.emplace_back(i, i, 0.5);
+    triplets.emplace_back(i + n, i + n, 0.5);
+  }
+  const SparseMatrixD A = from_triplets(2 * n, triplets);
+  Eigen::VectorXd b(A.rows());
+  for (Eigen::Index i = 0; i < b.size(); ++i) b(i) = 1.0 + std::sin(0.01 * double(i));
+  std::map<std::string, SolveReport> reports;
+  std::map<std::string, Eigen::VectorXd> solutions;
+  for (const std::string backend : {"cg", "cg-amg"}) {
+    auto solver = make_solver(backend, SolveOptions{1e-10, 100000});
+    solver->compute(A);
+    reports[backend] = solver->solve(b, solutions[backend]);
+    EXPECT_LE(reports[backend].residual, 1e-10) << backend;
+  }
+  EXPECT_LT(reports["cg-amg"].iterations, 60);
+  EXPECT_LT((solutions["cg-amg"] - solutions["cg"]).norm(), 1e-8 * solutions["cg"].norm());
+}
+
 TEST(LinearSolver, MultigridOnMeshSystemAndSingleLevel) {
   // A morph-like mesh system beats Jacobi-CG too; a system at most amg_coarsest unknowns is one level, solved
   // directly (one iteration).
