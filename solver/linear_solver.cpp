@@ -599,34 +599,24 @@ struct AmgLevel {
   Eigen::VectorXd b, x, u;                   // right-hand side, solution, D (x + P e)
 };
 
-/// Row i of S times v, with two interleaved partial sums (a row has ~15 entries). Columns are read as 16-bit offsets
-/// from the row where they fit (AmgLevel::offset): each pass over S then moves 6 bytes an entry instead of 8, the same
-/// products in the same order.
-inline double level_row(const AmgLevel& L, int i, const double* v) {
-  const float* val = L.val.data();
-  if (!L.offset.empty()) {
-    const std::int16_t* offset = L.offset.data();
-    const double* row = v + i;
-    const int last = L.start[i + 1];
-    double even = 0.0, odd = 0.0;
-    int k = L.start[i];
-    for (; k + 1 < last; k += 2) {
-      even += double(val[k]) * row[offset[k]];
-      odd += double(val[k + 1]) * row[offset[k + 1]];
-    }
-    if (k < last) even += double(val[k]) * row[offset[k]];
-    return even + odd;
-  }
-  const int* col = L.col;
-  const int last = L.start[i + 1];
+/// Sum of val[k] * x[index[k]] over k in [begin, last), with two interleaved partial sums (a row has ~15 entries).
+template <class Index>
+inline double sparse_row_dot(const float* val, const Index* index, int begin, int last, const double* x) {
   double even = 0.0, odd = 0.0;
-  int k = L.start[i];
+  int k = begin;
   for (; k + 1 < last; k += 2) {
-    even += double(val[k]) * v[col[k]];
-    odd += double(val[k + 1]) * v[col[k + 1]];
+    even += double(val[k]) * x[index[k]];
+    odd += double(val[k + 1]) * x[index[k + 1]];
   }
-  if (k < last) even += double(val[k]) * v[col[k]];
+  if (k < last) even += double(val[k]) * x[index[k]];
   return even + odd;
+}
+
+/// Row i of S times v. Columns are read as 16-bit offsets from the row where they fit (AmgLevel::offset): each pass
+/// over S then moves 6 bytes an entry instead of 8, the same products in the same order.
+inline double level_row(const AmgLevel& L, int i, const double* v) {
+  if (!L.offset.empty()) return sparse_row_dot(L.val.data(), L.offset.data(), L.start[i], L.start[i + 1], v + i);
+  return sparse_row_dot(L.val.data(), L.col, L.start[i], L.start[i + 1], v);
 }
 
 /// Galerkin operator P^T A P of the piecewise-constant prolongation of L.agg: coarse row c sums the rows of its
