@@ -33,8 +33,6 @@ constexpr double kDegenerateGramRatio = 1e-14;
 // thread count (each row is summed by one task in incident-tet order anyway).
 constexpr Eigen::Index kBlockRows = 2048;
 
-// Packed index of the symmetric 4x4 local stiffness entry (i, j).
-
 void check_mesh_arrays(const Points4& V, const TetIndices& T, const char* who) {
   if (V.cols() != 4) {
     std::ostringstream msg;
