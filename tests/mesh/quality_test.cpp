@@ -254,18 +254,18 @@ TetMesh4 extracted_mesh() {
   return extract_hypersurface(field, options).mesh;
 }
 
+/// What measure() returns when TBB may use at most `threads` threads.
+template <class Measure>
+QualityResult with_threads(int threads, const Measure& measure) {
+  tbb::global_control limit(tbb::global_control::max_allowed_parallelism, std::size_t(threads));
+  return measure();
+}
+
 TEST(QualityExtracted, SameResultForOneAndTwoThreadsAndAgreesWithLaplaceOperator) {
   const TetMesh4 mesh = extracted_mesh();
   ASSERT_GT(mesh.tet_count(), 3 * 8192);  // several tet chunks
-  QualityResult one, two;
-  {
-    tbb::global_control limit(tbb::global_control::max_allowed_parallelism, 1);
-    one = measure_quality(mesh);
-  }
-  {
-    tbb::global_control limit(tbb::global_control::max_allowed_parallelism, 2);
-    two = measure_quality(mesh);
-  }
+  const QualityResult one = with_threads(1, [&] { return measure_quality(mesh); });
+  const QualityResult two = with_threads(2, [&] { return measure_quality(mesh); });
   EXPECT_EQ(one.degenerate_tets, two.degenerate_tets);
   EXPECT_EQ(one.min_dihedral_degrees, two.min_dihedral_degrees);
   EXPECT_EQ(one.max_dihedral_degrees, two.max_dihedral_degrees);
@@ -322,15 +322,13 @@ TEST(QualityExtracted, SameResultForOneAndTwoThreadsAndAgreesWithLaplaceOperator
 TEST(QualityExtracted, FromStiffnessAgreesWithMeasureQuality) {
   const TetMesh4 mesh = extracted_mesh();
   const QualityResult reference = measure_quality(mesh);
-  QualityResult one, two;
-  {
-    tbb::global_control limit(tbb::global_control::max_allowed_parallelism, 1);
-    dirichlet_system(mesh, nullptr, &one);
-  }
-  {
-    tbb::global_control limit(tbb::global_control::max_allowed_parallelism, 2);
-    dirichlet_system(mesh, nullptr, &two);
-  }
+  auto from_stiffness = [&] {
+    QualityResult quality;
+    dirichlet_system(mesh, nullptr, &quality);
+    return quality;
+  };
+  const QualityResult one = with_threads(1, from_stiffness);
+  const QualityResult two = with_threads(2, from_stiffness);
   EXPECT_EQ(one.dihedral_histogram, two.dihedral_histogram);
   EXPECT_EQ(one.negative_cotangent_edges, two.negative_cotangent_edges);
   EXPECT_EQ(one.min_dihedral_degrees, two.min_dihedral_degrees);
