@@ -50,6 +50,10 @@ void add_pipeline_options(CLI::App& cmd, PipelineOptions& o) {
   cmd.add_option("--tolerance", o.laplace.solve.tolerance, "Relative residual at which iterative solvers stop")
       ->check(CLI::PositiveNumber)
       ->capture_default_str();
+  cmd.add_option("--deflation-voxels", o.laplace.deflation_cell_voxels,
+                 "CG solvers deflate the space-time cells of this many voxels (0: no deflation)")
+      ->check(CLI::NonNegativeNumber)
+      ->capture_default_str();
   cmd.add_option("--max-iterations", o.laplace.solve.max_iterations, "Iteration limit of iterative solvers")
       ->check(CLI::PositiveNumber)
       ->capture_default_str();

@@ -19,6 +19,8 @@
 // BM_SpMV/cow-horse/1.7Mx4 also multiplies four copies of it as one block-diagonal matrix (~190 MB) to measure
 // the memory-bound rate.
 //
+// BM_MapSolve: see below (the map's own systems, deflated).
+//
 // Run: morphmap_bench --benchmark_filter='BM_Solve|BM_SpMV' --benchmark_repetitions=3 --benchmark_format=json
 // Systems are built once per size (a few seconds each, not timed) and cached for all backends and repetitions.
 #include <benchmark/benchmark.h>
@@ -62,15 +64,18 @@ const std::vector<Case>& cases() {
 
 struct System {
   morphmap::DirichletSystem laplace;
+  morphmap::TetMesh4 mesh;  ///< kept for the deflation spaces (map systems only)
   std::int64_t tets = 0;
   std::string error;  ///< non-empty when the inputs are missing
 };
 
 /// Builds A, B as the pipeline does (a built-in shape is fitted to the other's bounding box), then the morph,
-/// the 4D mesh and the Dirichlet system. Cached per case: benchmarks and repetitions share it.
-const System& system_for(const Case& c) {
+/// the 4D mesh and the Dirichlet system. Cached per case: benchmarks and repetitions share it. `map_time_scale`:
+/// the map's default c (twice the bounding box, cells about 13 times longer in time than wide) instead of cubic
+/// cells.
+const System& system_for(const Case& c, bool map_time_scale = false) {
   static std::map<std::string, std::unique_ptr<System>> cache;
-  auto& slot = cache[c.morph + "/" + c.size];
+  auto& slot = cache[c.morph + "/" + c.size + (map_time_scale ? "/map" : "")];
   if (slot) return *slot;
   slot = std::make_unique<System>();
   morphmap::Surface A, B;
@@ -84,10 +89,11 @@ const System& system_for(const Case& c) {
   // Cubic lattice cells (c = K h), as the paper's meshes and the measurements quoted in solver/laplace.h: the
   // map's default c (twice the bounding box) makes s = t nearly harmonic, where Gauss-Seidel meets the paper's
   // change threshold after a few dozen sweeps at a residual far from converged.
-  extract_options.time_scale = c.time_steps * morph.field.voxel_size;
-  const morphmap::ExtractResult extract = morphmap::extract_hypersurface(morph.field, extract_options);
+  extract_options.time_scale = map_time_scale ? 0.0 : c.time_steps * morph.field.voxel_size;
+  morphmap::ExtractResult extract = morphmap::extract_hypersurface(morph.field, extract_options);
   slot->tets = extract.mesh.tet_count();
   slot->laplace = morphmap::dirichlet_system(extract.mesh);
+  if (map_time_scale) slot->mesh = std::move(extract.mesh);
   return *slot;
 }
 
@@ -139,6 +145,37 @@ void BM_Solve(benchmark::State& state, const Case& c, const std::string& name) {
   state.counters["nnz"] = static_cast<double>(s.A.nonZeros());
   state.counters["tets"] = static_cast<double>(system.tets);
   state.SetLabel(report.detail.empty() ? report.backend : report.detail);
+}
+
+// BM_MapSolve/<morph>/<size>/cg-amg/<cells>: cg-amg on the map's own systems (default c), set-up + solve from s = t to
+// 1e-8, deflated by the space-time cells of <cells> voxels (solve_harmonic's default 6; 0 = no deflation). The
+// space is built inside the timing, as solve_harmonic builds it. Counters as BM_Solve's, plus the columns.
+void BM_MapSolve(benchmark::State& state, const Case& c, double cell_voxels) {
+  const System& system = system_for(c, true);
+  if (!system.error.empty()) {
+    state.SkipWithError(system.error.c_str());
+    return;
+  }
+  const morphmap::DirichletSystem& s = system.laplace;
+  morphmap::SolveOptions options;
+  options.tolerance = 1e-8;
+  morphmap::SolveReport report;
+  for (auto _ : state) {
+    auto solver = morphmap::make_solver("cg-amg", options);
+    Eigen::VectorXd x = s.x0;
+    solver->set_deflation(morphmap::space_time_cells(system.mesh, s.unknown, int(s.A.rows()), cell_voxels));
+    solver->compute(s.A);
+    report = solver->solve(s.b, x);
+    benchmark::DoNotOptimize(x.data());
+  }
+  state.counters["iterations"] = report.iterations;
+  state.counters["residual"] = report.residual;
+  state.counters["columns"] = report.deflation_columns;
+  state.counters["setup_seconds"] = report.setup_seconds;
+  state.counters["solve_seconds"] = report.solve_seconds;
+  state.counters["memory_bytes"] = static_cast<double>(report.memory_bytes);
+  state.counters["unknowns"] = static_cast<double>(s.A.rows());
+  state.counters["tets"] = static_cast<double>(system.tets);
 }
 
 /// `copies` copies of A on the diagonal: the same rows, more bytes than the last-level cache holds.
@@ -202,6 +239,16 @@ const bool registered = [] {
                                  [c](benchmark::State& state) { BM_SpMV(state, c, 1); })
         ->UseRealTime()
         ->Unit(benchmark::kMicrosecond);
+  }
+  for (const Case& c : cases()) {
+    if (c.size.rfind("1.", 0) != 0) continue;  // the largest of each morph
+    for (const double cells : {0.0, 4.0, 6.0, 8.0}) {
+      const std::string name = "BM_MapSolve/" + c.morph + "/" + c.size + "/cg-amg/" + std::to_string(int(cells));
+      benchmark::RegisterBenchmark(name.c_str(), [c, cells](benchmark::State& state) { BM_MapSolve(state, c, cells); })
+          ->Iterations(1)
+          ->UseRealTime()
+          ->Unit(benchmark::kMillisecond);
+    }
   }
   const Case& largest = cases().back();
   benchmark::RegisterBenchmark(("BM_SpMV/" + largest.morph + "/" + largest.size + "x4").c_str(),

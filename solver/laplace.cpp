@@ -7,11 +7,13 @@
 #include <tbb/blocked_range.h>
 #include <tbb/enumerable_thread_specific.h>
 #include <tbb/parallel_for.h>
+#include <tbb/parallel_sort.h>
 
 #include <Eigen/Dense>
 #include <algorithm>
 #include <chrono>
 #include <cmath>
+#include <limits>
 #include <numeric>
 #include <sstream>
 #include <vector>
@@ -302,6 +304,90 @@ DirichletSystem dirichlet_system(const TetMesh4& mesh, const SharedStars& stars,
   return system;
 }
 
+DeflationSpace space_time_cells(const TetMesh4& mesh, const std::vector<int>& unknown, int unknowns,
+                                double cell_voxels) {
+  DeflationSpace space;
+  const double size = cell_voxels * mesh.voxel_size;
+  if (!(size > 0.0) || unknowns == 0 || mesh.vertex_count() == 0) return space;
+  const int levels = std::max(1, mesh.time_steps);  // time intervals: hats at the levels 0..levels
+  const Eigen::Vector3d origin = mesh.V.leftCols<3>().colwise().minCoeff().transpose();
+  // Each unknown: its cell's key, its position u in time (in intervals) and its index.
+  struct Point {
+    std::int64_t cell;
+    double u;
+    int index;
+  };
+  std::vector<Point> points(static_cast<std::size_t>(unknowns));
+  const Eigen::Index n = mesh.vertex_count();
+  constexpr std::int64_t kCellsPerAxis = std::int64_t(1) << 20;
+  tbb::parallel_for(Eigen::Index(0), n, [&](Eigen::Index v) {
+    const int i = unknown[static_cast<std::size_t>(v)];
+    if (i < 0) return;
+    std::int64_t key = 0;
+    for (int k = 0; k < 3; ++k) {
+      const auto c = static_cast<std::int64_t>(std::floor((mesh.V(v, k) - origin(k)) / size));
+      key = key * kCellsPerAxis + std::clamp<std::int64_t>(c, 0, kCellsPerAxis - 1);
+    }
+    const double u = std::clamp(mesh.time_of(v), 0.0, 1.0) * levels;
+    points[static_cast<std::size_t>(i)] = {key, u, i};
+  });
+  std::vector<Point> sorted = points;
+  tbb::parallel_sort(sorted.begin(), sorted.end(), [](const Point& a, const Point& b) {
+    return a.cell != b.cell ? a.cell < b.cell : a.u != b.u ? a.u < b.u : a.index < b.index;
+  });
+  // Per cell, its hats in increasing level, each kept when an unknown of the cell lies where the hat is at least
+  // kSeparation, at a t past the one the previous kept hat took by at least kSeparation intervals: then the cell's
+  // columns are independent (the square matrix of the kept hats at the points they took is totally positive with
+  // a positive diagonal), and not nearly dependent. kept[c * (levels + 1) + j] marks hat j of cell c.
+  constexpr double kSeparation = 0.01;
+  std::vector<std::int64_t> cell_of(static_cast<std::size_t>(unknowns));  // the cell's rank among the cells
+  std::vector<int> kept;
+  std::int64_t cells = 0;
+  for (std::size_t first = 0; first < sorted.size();) {
+    std::size_t last = first;
+    while (last < sorted.size() && sorted[last].cell == sorted[first].cell) ++last;
+    const std::size_t base = kept.size();
+    kept.resize(base + std::size_t(levels) + 1, -1);
+    double taken = -std::numeric_limits<double>::infinity();
+    std::size_t at = first;
+    for (int j = 0; j <= levels; ++j) {
+      while (at < last && !(sorted[at].u >= std::max(j - 1 + kSeparation, taken + kSeparation))) ++at;
+      if (at == last) break;
+      if (sorted[at].u <= j + 1 - kSeparation) {
+        kept[base + std::size_t(j)] = 0;  // numbered below
+        taken = sorted[at].u;
+      }
+    }
+    for (std::size_t k = first; k < last; ++k) cell_of[static_cast<std::size_t>(sorted[k].index)] = cells;
+    ++cells;
+    first = last;
+  }
+  // Columns numbered in order of first use by the unknowns (the extraction's order), so that a block of rows
+  // touches few of them.
+  for (int& column : kept) column = column == 0 ? -2 : -1;
+  space.column.setConstant(unknowns, 2, -1);
+  space.weight.setZero(unknowns, 2);
+  int columns = 0;
+  for (int i = 0; i < unknowns; ++i) {
+    const double u = points[static_cast<std::size_t>(i)].u;
+    const int j = std::min(static_cast<int>(u), levels - 1);
+    const double w = u - j;
+    const std::size_t base = static_cast<std::size_t>(cell_of[static_cast<std::size_t>(i)]) * (std::size_t(levels) + 1);
+    int e = 0;
+    for (int h = 0; h < 2; ++h) {
+      const double weight = h == 0 ? 1.0 - w : w;
+      int& column = kept[base + std::size_t(j + h)];
+      if (!(weight > 0.0) || column == -1) continue;
+      if (column == -2) column = columns++;
+      space.column(i, e) = column;
+      space.weight(i, e) = weight;
+      ++e;
+    }
+  }
+  space.columns = columns;
+  return space;
+}
+
 LaplaceResult solve_harmonic(const TetMesh4& mesh, const LaplaceOptions& options, const SharedStars& stars) {
   const auto start = Clock::now();
   // Before the expensive part, so a typo in the backend name fails fast.
@@ -318,6 +404,7 @@ LaplaceResult solve_harmonic(const TetMesh4& mesh, const LaplaceOptions& options
   // Direct backends ignore x; the iterative ones (gauss-seidel included) start from it.
   Eigen::VectorXd x = options.warm_start ? system.x0 : Eigen::VectorXd::Zero(system.A.rows());
   if (result.unknowns > 0) {
+    solver->set_deflation(space_time_cells(mesh, system.unknown, int(result.unknowns), options.deflation_cell_voxels));
     solver->compute(std::move(system.A));  // handed over, not copied: A is not needed after this
     result.report = solver->solve(system.b, x);
     for (Eigen::Index i = 0; i < result.s.size(); ++i) {

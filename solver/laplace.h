@@ -45,6 +45,9 @@ struct LaplaceOptions {
   /// anyway (quality_from_stiffness): on cow -> horse 0.13 s instead of the 0.19 s of measure_quality's own pass over
   /// the tets' geometry (medians of 5 interleaved runs); most of what is left is the per-edge sums.
   bool measure_quality = false;
+  /// Deflate the CG backends' solve by the space-time cells of this many voxels (space_time_cells); 0 = off.
+  /// See README "Solvers" for the measurement that chose it.
+  double deflation_cell_voxels = 6.0;
 };
 
 /// The Dirichlet problem of solve_harmonic as one linear system A x = b over the unknowns: the interior vertices
@@ -67,6 +70,18 @@ struct DirichletSystem {
 /// inconsistent mesh arrays.
 DirichletSystem dirichlet_system(const TetMesh4& mesh, const SharedStars& stars = nullptr,
                                  QualityResult* quality = nullptr);
+
+/// The coarse space that deflates the solve (DeflationSpace): functions piecewise constant on cubes of
+/// `cell_voxels` lattice voxels in space and piecewise linear in t between the lattice's time levels (the hats of
+/// the K + 1 levels), restricted to the unknowns (`unknown`: #V, a vertex's unknown or -1). CG's slow modes on these
+/// systems are smooth in space-time: the tets are many times longer in time than wide, so an aggregation hierarchy,
+/// which coarsens along the strong spatial couplings, keeps nearly every time level and corrects modes that vary
+/// slowly in t poorly. A hat whose cell holds too few unknowns spread over t to keep the columns independent is
+/// left out: each kept hat gets an unknown of its own in its support, with increasing t along the cell's hats
+/// (Schoenberg and Whitney's condition, which makes the columns of a cell independent). 0 columns when
+/// cell_voxels <= 0 or the mesh has no voxel size.
+DeflationSpace space_time_cells(const TetMesh4& mesh, const std::vector<int>& unknown, int unknowns,
+                                double cell_voxels);
 
 struct LaplaceResult {
   Eigen::VectorXd s;                     ///< #V harmonic field, 0 on A, 1 on B

@@ -879,6 +879,184 @@ class AggregationMultigrid {
   Eigen::SimplicialLLT<SparseMatrixD, Eigen::Lower, Eigen::AMDOrdering<int>> sparse_factor_;
 };
 
+/// The coarse part of deflated CG (DeflationSpace): A Z by rows, the Cholesky factor of E = Z^T A Z and the two
+/// transfers. Written by hand: Eigen's sparse product is sequential and general, where a row of Z has at most two
+/// entries and a row of A Z a handful (the Z columns of the row's neighbours). The restrictions Z^T v sum rows in
+/// order on one thread (a pass over #unknowns numbers, a few percent of an iteration), so every bit is the same for
+/// any thread count.
+class Deflation {
+ public:
+  bool active() const { return columns_ > 0; }
+  int columns() const { return columns_; }
+
+  /// Builds A Z and factorises E. An empty space (0 columns) leaves deflation off. Throws InvalidInput for a
+  /// malformed space; false when E is not numerically positive definite (dependent columns), deflation then off.
+  bool compute(const SparseMatrixD& A, const DeflationSpace& space, const std::string& backend) {
+    columns_ = 0;
+    az_start_.clear();
+    az_col_.clear();
+    az_val_.clear();
+    if (space.columns <= 0) return true;
+    const Eigen::Index n = A.rows();
+    if (space.column.rows() != n || space.weight.rows() != n) {
+      std::ostringstream msg;
+      msg << backend << ": deflation space has " << space.column.rows() << " rows for " << n << " unknowns";
+      throw InvalidInput(msg.str());
+    }
+    if (n > 0 && (space.column.maxCoeff() >= space.columns || space.column.minCoeff() < -1)) {
+      std::ostringstream msg;
+      msg << backend << ": deflation space has a column index outside [-1, " << space.columns << ")";
+      throw InvalidInput(msg.str());
+    }
+    z_col_ = space.column;
+    z_val_ = space.weight;
+    // Rows of A Z, block by block (each block's rows in order), then concatenated in block order.
+    const Eigen::Index blocks = block_count(n);
+    std::vector<std::vector<int>> block_col(static_cast<std::size_t>(blocks));
+    std::vector<std::vector<double>> block_val(static_cast<std::size_t>(blocks));
+    std::vector<int> row_length(static_cast<std::size_t>(n));
+    tbb::parallel_for(Eigen::Index(0), blocks, [&](Eigen::Index block) {
+      std::vector<int>& cols = block_col[static_cast<std::size_t>(block)];
+      std::vector<double>& vals = block_val[static_cast<std::size_t>(block)];
+      const Eigen::Index end = std::min(n, (block + 1) * kBlockRows);
+      for (Eigen::Index i = block * kBlockRows; i < end; ++i) {
+        const std::size_t first = cols.size();
+        for (SparseMatrixD::InnerIterator it(A, i); it; ++it) {
+          for (int e = 0; e < 2; ++e) {
+            const int c = z_col_(it.index(), e);
+            if (c < 0) continue;
+            const double value = it.value() * z_val_(it.index(), e);
+            std::size_t at = first;
+            while (at < cols.size() && cols[at] != c) ++at;
+            if (at == cols.size()) {
+              cols.push_back(c);
+              vals.push_back(value);
+            } else {
+              vals[at] += value;
+            }
+          }
+        }
+        row_length[static_cast<std::size_t>(i)] = int(cols.size() - first);
+      }
+    });
+    az_start_.assign(static_cast<std::size_t>(n) + 1, 0);
+    for (Eigen::Index i = 0; i < n; ++i)
+      az_start_[static_cast<std::size_t>(i) + 1] = az_start_[static_cast<std::size_t>(i)] + row_length[std::size_t(i)];
+    for (Eigen::Index block = 0; block < blocks; ++block) {
+      az_col_.insert(az_col_.end(), block_col[std::size_t(block)].begin(), block_col[std::size_t(block)].end());
+      az_val_.insert(az_val_.end(), block_val[std::size_t(block)].begin(), block_val[std::size_t(block)].end());
+    }
+    // E = Z^T (A Z), summed in row order; its lower triangle is what the factorisation reads.
+    std::vector<Eigen::Triplet<double>> entries;
+    entries.reserve(az_col_.size() * 2);
+    for (Eigen::Index i = 0; i < n; ++i)
+      for (int e = 0; e < 2; ++e) {
+        const int a = z_col_(i, e);
+        if (a < 0) continue;
+        for (int k = az_start_[std::size_t(i)]; k < az_start_[std::size_t(i) + 1]; ++k)
+          if (az_col_[std::size_t(k)] <= a)
+            entries.emplace_back(a, az_col_[std::size_t(k)], z_val_(i, e) * az_val_[std::size_t(k)]);
+      }
+    SparseMatrixD E(space.columns, space.columns);
+    E.setFromTriplets(entries.begin(), entries.end());
+    factor_.compute(E);
+    if (factor_.info() != Eigen::Success) {
+      az_start_.clear();
+      az_col_.clear();
+      az_val_.clear();
+      return false;
+    }
+    // The column span of each row block, for restrict_to_coarse.
+    span_lo_.assign(static_cast<std::size_t>(blocks), 0);
+    span_start_.assign(static_cast<std::size_t>(blocks) + 1, 0);
+    for (Eigen::Index block = 0; block < blocks; ++block) {
+      int lo = std::numeric_limits<int>::max(), hi = -1;
+      for (Eigen::Index i = block * kBlockRows; i < std::min(n, (block + 1) * kBlockRows); ++i)
+        for (int e = 0; e < 2; ++e)
+          if (z_col_(i, e) >= 0) {
+            lo = std::min(lo, z_col_(i, e));
+            hi = std::max(hi, z_col_(i, e));
+          }
+      span_lo_[std::size_t(block)] = hi < 0 ? 0 : lo;
+      span_start_[std::size_t(block) + 1] = span_start_[std::size_t(block)] + (hi < 0 ? 0 : hi - lo + 1);
+    }
+    partial_.resize(static_cast<std::size_t>(span_start_.back()));
+    columns_ = space.columns;
+    coarse_.resize(columns_);
+    return true;
+  }
+
+  /// coarse = Z^T v: each row block sums its rows in order into its own span of columns (the Laplace stage numbers
+  /// columns in order of first use, so a block's span is short), and the spans are added in block order.
+  void restrict_to_coarse(const Eigen::VectorXd& v, Eigen::VectorXd& coarse) {
+    const Eigen::Index n = v.size();
+    tbb::parallel_for(Eigen::Index(0), block_count(n), [&](Eigen::Index block) {
+      const std::size_t b = static_cast<std::size_t>(block);
+      double* sum = partial_.data() + span_start_[b];
+      std::fill(sum, sum + (span_start_[b + 1] - span_start_[b]), 0.0);
+      const int lo = span_lo_[b];
+      const Eigen::Index end = std::min(n, (block + 1) * kBlockRows);
+      for (Eigen::Index i = block * kBlockRows; i < end; ++i)
+        for (int e = 0; e < 2; ++e)
+          if (z_col_(i, e) >= 0) sum[z_col_(i, e) - lo] += z_val_(i, e) * v(i);
+    });
+    coarse.setZero(columns_);
+    for (std::size_t b = 0; b + 1 < span_start_.size(); ++b) {
+      const double* sum = partial_.data() + span_start_[b];
+      for (std::int64_t k = 0; k < span_start_[b + 1] - span_start_[b]; ++k) coarse(span_lo_[b] + k) += sum[k];
+    }
+  }
+
+  /// y = E^-1 Z^T v, kept for az_row.
+  void solve_coarse(const Eigen::VectorXd& v) {
+    restrict_to_coarse(v, coarse_);
+    y_ = factor_.solve(coarse_);
+  }
+  /// (Z^T v) . y after solve_coarse(v): v . A Z E^-1 Z^T v.
+  double coarse_energy() const { return coarse_.dot(y_); }
+
+  /// Row i of A Z y, y from the last solve_coarse.
+  double az_row(Eigen::Index i) const {
+    double sum = 0.0;
+    for (int k = az_start_[std::size_t(i)]; k < az_start_[std::size_t(i) + 1]; ++k)
+      sum += az_val_[std::size_t(k)] * y_(az_col_[std::size_t(k)]);
+    return sum;
+  }
+
+  /// x <- x + Z E^-1 (Z^T b - (A Z)^T x): from the deflated iterate to the solution of A x = b.
+  void complete(const Eigen::VectorXd& b, Eigen::VectorXd& x) {
+    restrict_to_coarse(b, coarse_);
+    for (Eigen::Index i = 0; i < x.size(); ++i)
+      for (int k = az_start_[std::size_t(i)]; k < az_start_[std::size_t(i) + 1]; ++k)
+        coarse_(az_col_[std::size_t(k)]) -= az_val_[std::size_t(k)] * x(i);
+    y_ = factor_.solve(coarse_);
+    for_blocks(x.size(), [&](Eigen::Index i) {
+      for (int e = 0; e < 2; ++e)
+        if (z_col_(i, e) >= 0) x(i) += z_val_(i, e) * y_(z_col_(i, e));
+    });
+  }
+
+  std::int64_t memory_bytes() const {
+    if (!active()) return 0;
+    const std::int64_t n = z_col_.rows();
+    const std::int64_t factor = factor_.matrixL().nestedExpression().nonZeros();
+    return n * 2 * (kIndexBytes + kDoubleBytes) + std::int64_t(az_col_.size()) * (kIndexBytes + kDoubleBytes) +
+           (n + 1) * kIndexBytes + factor * (kIndexBytes + kDoubleBytes) + 3 * std::int64_t(columns_) * kDoubleBytes;
+  }
+
+ private:
+  int columns_ = 0;
+  Eigen::Matrix<int, Eigen::Dynamic, 2, Eigen::RowMajor> z_col_;
+  Eigen::Matrix<double, Eigen::Dynamic, 2, Eigen::RowMajor> z_val_;
+  std::vector<int> az_start_, az_col_;
+  std::vector<double> az_val_;
+  Eigen::SimplicialLLT<SparseMatrixD, Eigen::Lower, Eigen::AMDOrdering<int>> factor_;
+  Eigen::VectorXd coarse_, y_;
+  std::vector<int> span_lo_;              // per row block: its first column
+  std::vector<std::int64_t> span_start_;  // per row block: where its span starts in partial_
+  std::vector<double> partial_;
+};
+
 enum class Preconditioner { Jacobi, IncompleteCholesky, Multigrid };
 
 class PcgSolver final : public LinearSolver {
@@ -931,6 +1109,14 @@ class PcgSolver final : public LinearSolver {
     report.solve_seconds = seconds_since(start_time);
     report.memory_bytes = memory_bytes();
     if (preconditioner_ == Preconditioner::Multigrid) report.detail = "cg-amg levels: " + amg_.describe();
+    report.deflation_columns = deflation_.columns();
+    if (deflation_.active()) {
+      report.detail += std::string(report.detail.empty() ? "" : "; ") + "deflated by " +
+                       std::to_string(deflation_.columns()) + " coarse columns";
+    } else if (deflation_failed_) {
+      report.detail += std::string(report.detail.empty() ? "" : "; ") +
+                       "deflation off: Z^T A Z is not numerically positive definite (dependent columns)";
+    }
     return report;
   }
 
@@ -939,11 +1125,13 @@ class PcgSolver final : public LinearSolver {
   std::int64_t memory_bytes() const {
     const auto n = static_cast<std::int64_t>(A_.rows());
     const std::int64_t partials = 2 * static_cast<std::int64_t>(block_count(A_.rows())) * kDoubleBytes;
-    if (preconditioner_ == Preconditioner::Jacobi) return 5 * n * kDoubleBytes + partials;
-    if (preconditioner_ == Preconditioner::Multigrid) return 5 * n * kDoubleBytes + partials + amg_.memory_bytes();
+    const std::int64_t deflation = deflation_.memory_bytes();
+    if (preconditioner_ == Preconditioner::Jacobi) return 5 * n * kDoubleBytes + partials + deflation;
+    if (preconditioner_ == Preconditioner::Multigrid)
+      return 5 * n * kDoubleBytes + partials + amg_.memory_bytes() + deflation;
     // L, the scaling S, and the vectors r, z, p, q, w.
     const std::int64_t factor = n > 0 ? sparse_bytes(ic_.matrixL().nonZeros(), n) : 0;
-    return factor + n * kDoubleBytes + 5 * n * kDoubleBytes + partials;
+    return factor + n * kDoubleBytes + 5 * n * kDoubleBytes + partials + deflation;
   }
 
   /// Begins CG on A x = b from x (zero if it is empty or not finite). A zero b gives x = 0, converged at once.
@@ -951,6 +1139,7 @@ class PcgSolver final : public LinearSolver {
     const Eigen::Index n = A_.rows();
     iterations_ = 0;
     converged_ = false;
+    complete_ = false;
     if (x.size() != n || !x.allFinite()) x = Eigen::VectorXd::Zero(n);
     b_norm_ = std::sqrt(dot(b, b));
     if (b_norm_ == 0.0) {
@@ -965,6 +1154,8 @@ class PcgSolver final : public LinearSolver {
     p_.resize(n);
     q_.resize(n);
     rr_ = residual(b, x, r_);
+    if (deflation_.active()) rr_ = deflate(r_);
+    complete_ = deflation_.active();
     rz_ = precondition(r_, z_);
     p_ = z_;
   }
@@ -979,6 +1170,7 @@ class PcgSolver final : public LinearSolver {
       if (std::sqrt(rr_) <= target_) {
         // The recurrence for r drifts from b - A x; accept only the true residual, else restart from it.
         rr_ = residual(b, x, r_);
+        if (deflation_.active()) rr_ = deflate(r_);
         if (std::sqrt(rr_) <= target_) {
           converged_ = true;
           break;
@@ -994,7 +1186,13 @@ class PcgSolver final : public LinearSolver {
             << std::sqrt(rr_) / b_norm_ << ", tolerance " << options_.tolerance << ")";
         throw SolverError(msg.str());
       }
-      const double pq = multiply_dot(p_, q_);
+      double pq = multiply_dot(p_, q_);
+      if (deflation_.active()) {
+        // The deflated operator P A, P = I - A Z E^-1 Z^T: (P A p)_i = q_i - (A Z y)_i with y = E^-1 Z^T q, and
+        // p . P A p = p . q - (Z^T q) . y (A is symmetric). The update passes subtract A Z y from q on the fly.
+        deflation_.solve_coarse(q_);
+        pq -= deflation_.coarse_energy();
+      }
       if (!(pq > 0.0) || !std::isfinite(pq)) {
         throw SolverError(name() + ": matrix is not positive definite (p^T A p = " + std::to_string(pq) + ")");
       }
@@ -1010,6 +1208,11 @@ class PcgSolver final : public LinearSolver {
       rz_ = rz_next;
       for_blocks(n, [&](Eigen::Index i) { p_(i) = z_(i) + beta * p_(i); });
       ++iterations_;
+    }
+    if (converged_ && complete_) {
+      // CG ran on P A x = P b; x + Z E^-1 Z^T (b - A x) solves A x = b, with the residual P (b - A x) just checked.
+      deflation_.complete(b, x);
+      complete_ = false;
     }
     return converged_;
   }
@@ -1033,6 +1236,7 @@ class PcgSolver final : public LinearSolver {
       if (ic_.info() != Eigen::Success) throw SolverError("cg-ic: incomplete Cholesky factorisation failed");
       w_.resize(A_.rows());
     }
+    deflation_failed_ = !deflation_.compute(A_, deflation_space_, name());
     ready_ = true;
   }
 
@@ -1044,6 +1248,15 @@ class PcgSolver final : public LinearSolver {
   double residual(const Eigen::VectorXd& b, const Eigen::VectorXd& x, Eigen::VectorXd& r) {
     return block_sum(b.size(), partial_a_, [&](Eigen::Index i) {
       r(i) = b(i) - row_times(A_, i, x);
+      return r(i) * r(i);
+    });
+  }
+
+  /// r <- P r = r - A Z E^-1 Z^T r; returns |r|^2.
+  double deflate(Eigen::VectorXd& r) {
+    deflation_.solve_coarse(r);
+    return block_sum(r.size(), partial_a_, [&](Eigen::Index i) {
+      r(i) -= deflation_.az_row(i);
       return r(i) * r(i);
     });
   }
@@ -1076,8 +1289,15 @@ class PcgSolver final : public LinearSolver {
     });
   }
 
-  /// x += alpha p, r -= alpha q; returns r.r.
+  /// x += alpha p, r -= alpha P q (P q = q - A Z y when deflated); returns r.r.
   double update(double alpha, Eigen::VectorXd& x) {
+    if (deflation_.active()) {
+      return block_sum(x.size(), partial_a_, [&](Eigen::Index i) {
+        x(i) += alpha * p_(i);
+        r_(i) -= alpha * (q_(i) - deflation_.az_row(i));
+        return r_(i) * r_(i);
+      });
+    }
     return block_sum(x.size(), partial_a_, [&](Eigen::Index i) {
       x(i) += alpha * p_(i);
       r_(i) -= alpha * q_(i);
@@ -1091,12 +1311,13 @@ class PcgSolver final : public LinearSolver {
     const Eigen::Index blocks = block_count(n);
     partial_a_.resize(static_cast<std::size_t>(blocks));
     partial_b_.resize(static_cast<std::size_t>(blocks));
+    const bool deflated = deflation_.active();
     tbb::parallel_for(Eigen::Index(0), blocks, [&](Eigen::Index block) {
       const Eigen::Index end = std::min(n, (block + 1) * kBlockRows);
       double rz_sum = 0.0, rr_sum = 0.0;
       for (Eigen::Index i = block * kBlockRows; i < end; ++i) {
         x(i) += alpha * p_(i);
-        r_(i) -= alpha * q_(i);
+        r_(i) -= alpha * (deflated ? q_(i) - deflation_.az_row(i) : q_(i));
         z_(i) = inverse_diagonal_(i) * r_(i);
         rz_sum += r_(i) * z_(i);
         rr_sum += r_(i) * r_(i);
@@ -1119,6 +1340,9 @@ class PcgSolver final : public LinearSolver {
   Eigen::VectorXd inverse_diagonal_;
   Eigen::IncompleteCholesky<double, Eigen::Lower, Eigen::NaturalOrdering<int>> ic_;
   AggregationMultigrid amg_;
+  Deflation deflation_;
+  bool deflation_failed_ = false;  // a space was given but Z^T A Z could not be factorised
+  bool complete_ = false;          // x is the deflated iterate until advance() completes it at convergence
   Eigen::VectorXd r_, z_, p_, q_, w_;
   std::vector<double> partial_a_, partial_b_;
   // CG state between start() and the end of advance(): |r|^2, r.z, |b|, the absolute target, the count.
@@ -1536,6 +1760,7 @@ class AutoSolver final : public LinearSolver {
     candidates.reserve(3);  // no reallocation: `best` points into it
     candidates.push_back({std::make_unique<PcgSolver>(options_, Preconditioner::Multigrid), x, {}});
     Candidate& amg = candidates.back();
+    amg.solver->set_deflation(deflation_space_);
     amg.estimate = probe_cg(*amg.solver, b, amg.x);
     detail << amg.estimate.how;
     probe_bytes_ = amg.solver->memory_bytes();
@@ -1556,6 +1781,7 @@ class AutoSolver final : public LinearSolver {
         for (Preconditioner kind : {Preconditioner::Jacobi, Preconditioner::IncompleteCholesky}) {
           candidates.push_back({std::make_unique<PcgSolver>(options_, kind), x, {}});
           Candidate& c = candidates.back();
+          c.solver->set_deflation(deflation_space_);
           c.estimate = probe_cg(*c.solver, b, c.x);
           detail << "; " << c.estimate.how;
           probe_bytes_ += c.solver->memory_bytes();

@@ -610,18 +610,106 @@ TEST(LinearSolver, CgWarmStartFromSolutionTakesNoIteration) {
   EXPECT_LT(solver->solve(A * expected, warm).iterations, cold_iterations);
 }
 
+/// Piecewise-constant columns over consecutive runs of `run` unknowns: a deflation space with one entry a row.
+DeflationSpace run_space(Eigen::Index n, int run) {
+  DeflationSpace space;
+  space.columns = int((n + run - 1) / run);
+  space.column.setConstant(n, 2, -1);
+  space.weight.setZero(n, 2);
+  for (Eigen::Index i = 0; i < n; ++i) {
+    space.column(i, 0) = int(i / run);
+    space.weight(i, 0) = 1.0;
+  }
+  return space;
+}
+
+// Deflating a 1D Laplacian by piecewise constants removes its smoothest modes, which are what makes Jacobi-CG slow:
+// every CG backend (and auto's choice) keeps its solution and the report counts the columns; cg needs far fewer
+// iterations.
+TEST(LinearSolver, DeflationKeepsTheSolutionAndCutsIterations) {
+  const SparseMatrixD A = path_laplacian(2000, 1e-4);
+  const Eigen::VectorXd b = cosine_rhs(A.rows());
+  for (const std::string backend : {"cg", "cg-ic", "cg-amg", "auto"}) {
+    const SolveOptions options{1e-10, 100000};
+    SolveReport plain_report, deflated_report;
+    Eigen::VectorXd plain, deflated;
+    {
+      auto solver = make_solver(backend, options);
+      solver->compute(A);
+      plain_report = solver->solve(b, plain);
+    }
+    {
+      auto solver = make_solver(backend, options);
+      solver->set_deflation(run_space(A.rows(), 50));
+      solver->compute(A);
+      deflated_report = solver->solve(b, deflated);
+    }
+    EXPECT_EQ(plain_report.deflation_columns, 0) << backend;
+    if (deflated_report.backend != "cholmod") {
+      EXPECT_EQ(deflated_report.deflation_columns, 40) << backend << " ran " << deflated_report.backend;
+    }
+    EXPECT_LE(deflated_report.residual, 1e-10) << backend;
+    EXPECT_LT((deflated - plain).norm(), 1e-7 * plain.norm()) << backend;
+    if (backend == std::string("cg")) {
+      EXPECT_LT(3 * deflated_report.iterations, plain_report.iterations)
+          << deflated_report.iterations << " against " << plain_report.iterations;
+    }
+  }
+}
+
+TEST(LinearSolver, DeflationWithDependentColumnsIsDropped) {
+  const SparseMatrixD A = path_laplacian(300, 0.01);
+  const Eigen::VectorXd b = cosine_rhs(A.rows());
+  DeflationSpace space = run_space(A.rows(), 30);
+  space.columns += 1;  // the last column repeats the first one's rows: Z^T A Z is singular
+  for (Eigen::Index i = 0; i < 30; ++i) {
+    space.column(i, 1) = space.columns - 1;
+    space.weight(i, 1) = 2.0;
+  }
+  auto solver = make_solver("cg", SolveOptions{1e-10, 100000});
+  solver->set_deflation(space);
+  solver->compute(A);
+  Eigen::VectorXd x;
+  const SolveReport report = solver->solve(b, x);
+  EXPECT_EQ(report.deflation_columns, 0);
+  EXPECT_NE(report.detail.find("deflation off"), std::string::npos) << report.detail;
+  EXPECT_LE(report.residual, 1e-10);
+}
+
+TEST(LinearSolver, RejectsMalformedDeflation) {
+  const SparseMatrixD A = path_laplacian(100, 0.01);
+  DeflationSpace columns = run_space(100, 10);
+  columns.column(5, 0) = 10;
+  const std::vector<std::pair<DeflationSpace, std::string>> cases = {
+      {run_space(99, 10), ": deflation space has 99 rows for 100 unknowns"},
+      {columns, ": deflation space has a column index outside [-1, 10)"}};
+  for (const std::string backend : {"cg", "cg-amg"})
+    for (const auto& [space, message] : cases) {
+      auto solver = make_solver(backend);
+      solver->set_deflation(space);
+      try {
+        solver->compute(A);
+        ADD_FAILURE() << "expected InvalidInput: " << message;
+      } catch (const InvalidInput& e) {
+        EXPECT_EQ(std::string(e.what()), backend + message);
+      }
+    }
+}
+
 TEST(LinearSolver, IterativeBackendsBitwiseIndependentOfThreadCount) {
   // Big enough for several row blocks, so a thread-count-dependent reduction would show.
   const SparseMatrixD A = slab_system(22, 22);
   ASSERT_GT(A.rows(), 2 * 4096);
   Eigen::VectorXd b(A.rows());
   for (Eigen::Index i = 0; i < b.size(); ++i) b(i) = std::cos(0.37 * static_cast<double>(i));
-  for (const std::string backend : {"cg", "cg-ic", "cg-amg", "gauss-seidel"}) {
+  for (const std::string backend : {"cg", "cg-ic", "cg-amg", "gauss-seidel", "deflated cg-amg"}) {
     std::vector<Eigen::VectorXd> solutions;
     std::vector<int> iterations;
     for (int threads : {1, 2}) {
       tbb::global_control limit(tbb::global_control::max_allowed_parallelism, static_cast<std::size_t>(threads));
-      auto solver = make_solver(backend);
+      const bool deflated = backend.rfind("deflated ", 0) == 0;
+      auto solver = make_solver(deflated ? backend.substr(9) : backend);
+      if (deflated) solver->set_deflation(run_space(A.rows(), 97));  // spans crossing the row blocks' edges
       solver->compute(A);
       Eigen::VectorXd x;
       iterations.push_back(solver->solve(b, x).iterations);
