@@ -17,10 +17,14 @@ SolverComparisonResult compare_solvers(const TetMesh4& mesh, const Eigen::Vector
   for (const std::string& name : backends) (void)make_solver(name, options.solve);  // reject before assembling
   const DirichletSystem system = dirichlet_system(mesh);
   result.assemble_seconds = system.assemble_seconds;
+  // The CG backends get solve_harmonic's deflation too (the others ignore it).
+  const DeflationSpace deflation =
+      space_time_cells(mesh, system.unknown, int(system.A.rows()), options.deflation_cell_voxels);
   for (const std::string& name : backends) {
     const std::unique_ptr<LinearSolver> solver = make_solver(name, options.solve);
     // The same start as solve_harmonic's, so iteration counts compare like for like.
     Eigen::VectorXd x = options.warm_start ? system.x0 : Eigen::VectorXd::Zero(system.b.size());
+    solver->set_deflation(deflation);
     solver->compute(system.A);
     const SolveReport report = solver->solve(system.b, x);
     SolverComparison c;
