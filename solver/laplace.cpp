@@ -304,8 +304,10 @@ DirichletSystem dirichlet_system(const TetMesh4& mesh, const SharedStars& stars,
   return system;
 }
 
-DeflationSpace space_time_cells(const TetMesh4& mesh, const std::vector<int>& unknown, int unknowns,
-                                double cell_voxels) {
+namespace {
+
+/// space_time_cells for one cell size.
+DeflationSpace cells_of(const TetMesh4& mesh, const std::vector<int>& unknown, int unknowns, double cell_voxels) {
   DeflationSpace space;
   const double size = cell_voxels * mesh.voxel_size;
   if (!(size > 0.0) || unknowns == 0 || mesh.vertex_count() == 0) return space;
@@ -385,6 +387,18 @@ DeflationSpace space_time_cells(const TetMesh4& mesh, const std::vector<int>& un
     }
   }
   space.columns = columns;
+  return space;
+}
+
+}  // namespace
+
+DeflationSpace space_time_cells(const TetMesh4& mesh, const std::vector<int>& unknown, int unknowns, double cell_voxels,
+                                int max_columns) {
+  DeflationSpace space = cells_of(mesh, unknown, unknowns, cell_voxels);
+  for (double voxels = cell_voxels; space.columns > std::max(1, max_columns);) {
+    voxels *= 1.5;
+    space = cells_of(mesh, unknown, unknowns, voxels);
+  }
   return space;
 }
 

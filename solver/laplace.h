@@ -79,9 +79,11 @@ DirichletSystem dirichlet_system(const TetMesh4& mesh, const SharedStars& stars 
 /// slowly in t poorly. A hat whose cell holds too few unknowns spread over t to keep the columns independent is
 /// left out: each kept hat gets an unknown of its own in its support, with increasing t along the cell's hats
 /// (Schoenberg and Whitney's condition, which makes the columns of a cell independent). 0 columns when
-/// cell_voxels <= 0 or the mesh has no voxel size.
-DeflationSpace space_time_cells(const TetMesh4& mesh, const std::vector<int>& unknown, int unknowns,
-                                double cell_voxels);
+/// cell_voxels <= 0 or the mesh has no voxel size. A space of more than max_columns columns is rebuilt with cells
+/// 1.5 times larger until it has at most that many: the factor of Z^T A Z, solved once per CG iteration on one
+/// thread, grows faster than the columns (cow -> horse at 21 M tets has 12903 with 6-voxel cells).
+DeflationSpace space_time_cells(const TetMesh4& mesh, const std::vector<int>& unknown, int unknowns, double cell_voxels,
+                                int max_columns = 20000);
 
 struct LaplaceResult {
   Eigen::VectorXd s;                     ///< #V harmonic field, 0 on A, 1 on B

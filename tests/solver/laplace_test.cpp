@@ -432,6 +432,11 @@ TEST(LaplaceDeflation, SpaceTimeCellsAreIndependentHatsInTime) {
   EXPECT_GT(eigen.eigenvalues()(0), 0.5);
   // Off: no columns.
   EXPECT_EQ(space_time_cells(mesh, system.unknown, unknowns, 0.0).columns, 0);
+  // Capped: cells grow by 1.5 until the space fits (6 voxels: 4 x 4 cells, more than 60 columns; 9 voxels: 3 x 3).
+  const DeflationSpace capped = space_time_cells(mesh, system.unknown, unknowns, 6.0, 60);
+  EXPECT_LE(capped.columns, 60);
+  EXPECT_EQ(capped.columns, space_time_cells(mesh, system.unknown, unknowns, 9.0).columns);
+  EXPECT_LT(capped.columns, space.columns);
 }
 
 TEST(LaplaceDeflation, CellWithFewUnknownsKeepsIndependentHats) {
