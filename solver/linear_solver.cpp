@@ -9,6 +9,7 @@
 #include <tbb/blocked_range.h>
 #include <tbb/enumerable_thread_specific.h>
 #include <tbb/parallel_for.h>
+#include <tbb/task_group.h>
 
 #include <Eigen/Cholesky>
 #include <Eigen/IterativeLinearSolvers>
@@ -1221,6 +1222,19 @@ class PcgSolver final : public LinearSolver {
 
  private:
   void setup(const Eigen::VectorXd& diagonal) {
+    // The deflation's set-up has sequential parts (Z^T A Z's entries, its factorisation): it runs beside the
+    // preconditioner's, whose passes are parallel. Both are deterministic, so the result does not depend on the
+    // schedule; wait() rethrows an exception of either.
+    tbb::task_group group;
+    bool deflated = true;
+    group.run([&] { deflated = deflation_.compute(A_, deflation_space_, name()); });
+    group.run([&] { setup_preconditioner(diagonal); });
+    group.wait();
+    deflation_failed_ = !deflated;
+    ready_ = true;
+  }
+
+  void setup_preconditioner(const Eigen::VectorXd& diagonal) {
     if (preconditioner_ == Preconditioner::Jacobi) {
       inverse_diagonal_ = diagonal.cwiseInverse();
     } else if (preconditioner_ == Preconditioner::Multigrid) {
@@ -1236,8 +1250,6 @@ class PcgSolver final : public LinearSolver {
       if (ic_.info() != Eigen::Success) throw SolverError("cg-ic: incomplete Cholesky factorisation failed");
       w_.resize(A_.rows());
     }
-    deflation_failed_ = !deflation_.compute(A_, deflation_space_, name());
-    ready_ = true;
   }
 
   double dot(const Eigen::VectorXd& a, const Eigen::VectorXd& b) {
