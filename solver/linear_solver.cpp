@@ -882,9 +882,9 @@ class AggregationMultigrid {
 
 /// The coarse part of deflated CG (DeflationSpace): A Z by rows, the Cholesky factor of E = Z^T A Z and the two
 /// transfers. Written by hand: Eigen's sparse product is sequential and general, where a row of Z has at most two
-/// entries and a row of A Z a handful (the Z columns of the row's neighbours). The restrictions Z^T v sum rows in
-/// order on one thread (a pass over #unknowns numbers, a few percent of an iteration), so every bit is the same for
-/// any thread count.
+/// entries and a row of A Z a handful (the Z columns of the row's neighbours). Every sum has one order whatever the
+/// thread count: A Z's rows are built block by block in row order, E's entries are summed in row order, and the
+/// restriction Z^T v sums each row block into its own span of columns and adds the spans in block order.
 class Deflation {
  public:
   bool active() const { return columns_ > 0; }
