@@ -124,6 +124,7 @@ ChangeMeasure parse_change_measure(const std::string& name);
 ///  - "auto": measures cholmod, cg and cg-ic on the actual system (see AutoSolver in the .cpp) and runs the one
 ///    estimated fastest. Its choice depends on timings, so it is the one backend whose output can vary from run
 ///    to run; name a backend for bitwise reproducible results.
+/// The CG backends (cg, cg-ic, cg-amg) deflate the coarse space given by set_deflation, if any.
 /// Throws InvalidInput for an unknown name.
 std::unique_ptr<LinearSolver> make_solver(const std::string& name, const SolveOptions& options = {});
 
