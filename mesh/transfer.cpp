@@ -278,12 +278,18 @@ SurfaceLocator::SurfaceLocator(const Surface& surface) : impl_(std::make_unique<
 
 SurfaceLocator::~SurfaceLocator() = default;
 
-SurfaceHit SurfaceLocator::closest(const Eigen::Vector3d& query) const {
+SurfaceHit SurfaceLocator::closest(const Eigen::Vector3d& query) const { return closest_near(query, -1); }
+
+SurfaceHit SurfaceLocator::closest_near(const Eigen::Vector3d& query, int hint) const {
   if (!query.allFinite()) throw InvalidInput("SurfaceLocator::closest: non-finite query point");
   const Impl& m = *impl_;
   Search search;
   search.faces = &m.faces;
   search.query = query;
+  // A face near the answer, visited first, bounds the search radius from the start: Embree then prunes every node
+  // farther than it instead of descending from an infinite radius. The answer is the lexicographic minimum of
+  // (distance, face) over the faces within the radius, which the bound's margin keeps, so it is the same.
+  if (hint >= 0 && std::size_t(hint) < m.faces.size()) search.visit(unsigned(hint));
   const Eigen::Vector3d local = query - m.shift;
   const double reach = local.cwiseAbs().maxCoeff();
   if (m.scene != nullptr && reach < kFloatReach) {
@@ -295,7 +301,7 @@ SurfaceHit SurfaceLocator::closest(const Eigen::Vector3d& query) const {
     point.y = float(local.y());
     point.z = float(local.z());
     point.time = 0.0f;
-    point.radius = std::numeric_limits<float>::infinity();
+    point.radius = search.best_face >= 0 ? search.radius() : std::numeric_limits<float>::infinity();
     RTCPointQueryContext context;
     rtcInitPointQueryContext(&context);
     rtcPointQuery(m.scene, &point, &context, visit_face, &search);
@@ -316,8 +322,14 @@ SurfaceHit SurfaceLocator::closest(const Eigen::Vector3d& query) const {
 std::vector<SurfaceHit> SurfaceLocator::closest_all(const Eigen::MatrixXd& Q) const {
   if (Q.rows() > 0 && Q.cols() != 3) throw InvalidInput("SurfaceLocator::closest_all: queries must be #Q by 3");
   std::vector<SurfaceHit> hits(std::size_t(Q.rows()));
+  // Callers pass queries in a coherent order (lattice points, mesh vertices), so each query starts from the face
+  // of the one before it (closest_near; the same hits as closest()).
   tbb::parallel_for(tbb::blocked_range<Eigen::Index>(0, Q.rows(), 256), [&](const tbb::blocked_range<Eigen::Index>& r) {
-    for (Eigen::Index i = r.begin(); i != r.end(); ++i) hits[std::size_t(i)] = closest(Q.row(i).transpose());
+    int hint = -1;
+    for (Eigen::Index i = r.begin(); i != r.end(); ++i) {
+      hits[std::size_t(i)] = closest_near(Q.row(i).transpose(), hint);
+      hint = hits[std::size_t(i)].face;
+    }
   });
   return hits;
 }

@@ -227,6 +227,30 @@ TEST(TransferTest, AffineUvIsInterpolatedExactlyAtTrueClosestPoints) {
   }
 }
 
+// A hint only bounds the search: any face, near or far, gives closest()'s hit. closest_all hints each query with the
+// previous one's face, which on a lattice in order (as the morph's exact distances query it) is near.
+TEST(TransferTest, HintedQueriesMatchClosest) {
+  const Surface surface = to_surface(test_mesh::icosphere(2));
+  const SurfaceLocator locator(surface);
+  std::vector<Eigen::Vector3d> lattice;
+  for (int k = 0; k < 12; ++k)
+    for (int j = 0; j < 12; ++j)
+      for (int i = 0; i < 12; ++i) lattice.emplace_back(-1.6 + 0.29 * i, -1.6 + 0.29 * j, -1.6 + 0.29 * k);
+  Eigen::MatrixXd Q(Eigen::Index(lattice.size()), 3);
+  for (std::size_t q = 0; q < lattice.size(); ++q) Q.row(Eigen::Index(q)) = lattice[q].transpose();
+  const std::vector<SurfaceHit> all = locator.closest_all(Q);
+  for (Eigen::Index i = 0; i < Q.rows(); ++i) {
+    const SurfaceHit one = locator.closest(Q.row(i).transpose());
+    EXPECT_EQ(all[std::size_t(i)].face, one.face);
+    EXPECT_EQ(all[std::size_t(i)].point, one.point);
+    for (const int hint : {0, int(surface.F.rows()) - 1, one.face, -1, int(surface.F.rows()) + 5}) {
+      const SurfaceHit hinted = locator.closest_near(Q.row(i).transpose(), hint);
+      EXPECT_EQ(hinted.face, one.face) << i << " hint " << hint;
+      EXPECT_EQ(hinted.point, one.point) << i << " hint " << hint;
+    }
+  }
+}
+
 TEST(TransferTest, ClosestAllMatchesClosestInOrder) {
   const SurfaceLocator locator(to_surface(test_mesh::icosphere(2)));
   const Eigen::MatrixXd Q = random_points(5000, 1.5, 11);
