@@ -406,11 +406,7 @@ QualityResult quality_from_stiffness(const TetMesh4& mesh, const PackedStiffness
     }
     return v;
   };
-  auto edge = [&](Eigen::Index t, int e) {
-    double K[4][4];
-    unpack_stiffness(stiffness.row(t).data(), K);
-    return K[kEdge[e][0]][kEdge[e][1]];
-  };
+  auto edge = [&](Eigen::Index t, int e) { return stiffness_entry(stiffness.row(t).data(), kEdge[e][0], kEdge[e][1]); };
   return measure_with(mesh, options, stars, start, measure, edge);
 }
 

@@ -340,8 +340,10 @@ DeflationSpace cells_of(const TetMesh4& mesh, const std::vector<int>& unknown, i
   // Per cell, its hats in increasing level, each kept when an unknown of the cell lies where the hat is at least
   // kSeparation, at a t past the one the previous kept hat took by at least kSeparation intervals: then the cell's
   // columns are independent (the square matrix of the kept hats at the points they took is totally positive with
-  // a positive diagonal), and not nearly dependent. kept[c * (levels + 1) + j] marks hat j of cell c.
+  // a positive diagonal), and not nearly dependent. kept[c * (levels + 1) + j] is hat j of cell c's column, once
+  // numbered, kUnnumbered before, or kDropped.
   constexpr double kSeparation = 0.01;
+  constexpr int kDropped = -1, kUnnumbered = -2;
   std::vector<std::int64_t> cell_of(static_cast<std::size_t>(unknowns));  // the cell's rank among the cells
   std::vector<int> kept;
   std::int64_t cells = 0;
@@ -349,14 +351,14 @@ DeflationSpace cells_of(const TetMesh4& mesh, const std::vector<int>& unknown, i
     std::size_t last = first;
     while (last < sorted.size() && sorted[last].cell == sorted[first].cell) ++last;
     const std::size_t base = kept.size();
-    kept.resize(base + std::size_t(levels) + 1, -1);
+    kept.resize(base + std::size_t(levels) + 1, kDropped);
     double taken = -std::numeric_limits<double>::infinity();
     std::size_t at = first;
     for (int j = 0; j <= levels; ++j) {
       while (at < last && !(sorted[at].u >= std::max(j - 1 + kSeparation, taken + kSeparation))) ++at;
       if (at == last) break;
       if (sorted[at].u <= j + 1 - kSeparation) {
-        kept[base + std::size_t(j)] = 0;  // numbered below
+        kept[base + std::size_t(j)] = kUnnumbered;
         taken = sorted[at].u;
       }
     }
@@ -366,7 +368,6 @@ DeflationSpace cells_of(const TetMesh4& mesh, const std::vector<int>& unknown, i
   }
   // Columns numbered in order of first use by the unknowns (the extraction's order), so that a block of rows
   // touches few of them.
-  for (int& column : kept) column = column == 0 ? -2 : -1;
   space.column.setConstant(unknowns, 2, -1);
   space.weight.setZero(unknowns, 2);
   int columns = 0;
@@ -379,8 +380,8 @@ DeflationSpace cells_of(const TetMesh4& mesh, const std::vector<int>& unknown, i
     for (int h = 0; h < 2; ++h) {
       const double weight = h == 0 ? 1.0 - w : w;
       int& column = kept[base + std::size_t(j + h)];
-      if (!(weight > 0.0) || column == -1) continue;
-      if (column == -2) column = columns++;
+      if (!(weight > 0.0) || column == kDropped) continue;
+      if (column == kUnnumbered) column = columns++;
       space.column(i, e) = column;
       space.weight(i, e) = weight;
       ++e;

@@ -234,11 +234,16 @@ double relative_residual(const SparseMatrixD& A, const Eigen::VectorXd& b, const
   return b_norm > 0.0 ? r_norm / b_norm : r_norm;
 }
 
-/// Takes A's storage (A is left empty), compressed, and checks it; the one entry point of every backend's compute.
-Eigen::VectorXd take_matrix(SparseMatrixD& A, SparseMatrixD& own, const std::string& backend) {
+/// Moves A's storage into `own` (A is left empty), compressed.
+void take_storage(SparseMatrixD& A, SparseMatrixD& own) {
   own = SparseMatrixD();
   own.swap(A);
   own.makeCompressed();
+}
+
+/// Takes A's storage (A is left empty), compressed, and checks it; the one entry point of every backend's compute.
+Eigen::VectorXd take_matrix(SparseMatrixD& A, SparseMatrixD& own, const std::string& backend) {
+  take_storage(A, own);
   return check_spd_input(own, backend);
 }
 
@@ -301,9 +306,7 @@ class CholmodSolver final : public LinearSolver {
     ready_ = false;
     free_factor();
     free_lower();
-    A_ = SparseMatrixD();
-    A_.swap(A);
-    A_.makeCompressed();
+    take_storage(A, A_);
     if (A_.cols() > 0) analyze_lower();
     analyze_seconds_ = seconds_since(start);
   }
@@ -1303,19 +1306,16 @@ class PcgSolver final : public LinearSolver {
 
   /// x += alpha p, r -= alpha P q (P q = q - A Z y when deflated); returns r.r.
   double update(double alpha, Eigen::VectorXd& x) {
-    if (deflation_.active()) {
-      return block_sum(x.size(), partial_a_, [&](Eigen::Index i) {
-        x(i) += alpha * p_(i);
-        r_(i) -= alpha * (q_(i) - deflation_.az_row(i));
-        return r_(i) * r_(i);
-      });
-    }
+    const bool deflated = deflation_.active();
     return block_sum(x.size(), partial_a_, [&](Eigen::Index i) {
       x(i) += alpha * p_(i);
-      r_(i) -= alpha * q_(i);
+      r_(i) -= alpha * projected_q(i, deflated);
       return r_(i) * r_(i);
     });
   }
+
+  /// (P A p)_i: q_i, less (A Z y)_i when deflated (y from the iteration's solve_coarse(q)).
+  double projected_q(Eigen::Index i, bool deflated) const { return deflated ? q_(i) - deflation_.az_row(i) : q_(i); }
 
   /// x += alpha p, r -= alpha q, z = D^-1 r in one pass; returns r.z and sets rr = r.r.
   double update_jacobi(double alpha, Eigen::VectorXd& x, double& rr) {
@@ -1329,7 +1329,7 @@ class PcgSolver final : public LinearSolver {
       double rz_sum = 0.0, rr_sum = 0.0;
       for (Eigen::Index i = block * kBlockRows; i < end; ++i) {
         x(i) += alpha * p_(i);
-        r_(i) -= alpha * (deflated ? q_(i) - deflation_.az_row(i) : q_(i));
+        r_(i) -= alpha * projected_q(i, deflated);
         z_(i) = inverse_diagonal_(i) * r_(i);
         rz_sum += r_(i) * z_(i);
         rr_sum += r_(i) * r_(i);
