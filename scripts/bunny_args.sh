@@ -1,3 +1,4 @@
+# shellcheck shell=bash disable=SC2034  # sourced: the variables it sets are the caller's
 # Sourced by the sphere -> bunny scripts (study_bunny.sh, reproduce_table1.sh) with "$@" and a default output
 # folder name: checks MODELS_DIR, needs jq, and sets models, repo, out (created) and bin (MORPHMAP or the build).
 default_out=$1

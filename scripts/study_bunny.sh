@@ -26,6 +26,7 @@ run() {  # V K m method -> out/vV-kK-cm-method/report.json
   rm -rf "$dir"
   echo "study: $args" >&2
   # map renames report.json into place last; args.txt, written after it, marks the run as done for this grid point.
+  # shellcheck disable=SC2086  # $args: the map's arguments, one word each (no spaces in them)
   if "$bin" $args >"$dir.log" 2>&1; then
     echo "$args" >"$dir/args.txt"
   else
