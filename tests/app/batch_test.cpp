@@ -8,9 +8,7 @@
 #include <unistd.h>
 
 #include <algorithm>
-#include <array>
 #include <chrono>
-#include <cstdio>
 #include <filesystem>
 #include <fstream>
 #include <nlohmann/json.hpp>
@@ -19,6 +17,7 @@
 #include <thread>
 
 #include "mesh/errors.h"
+#include "tests/command_line.h"
 
 namespace fs = std::filesystem;
 
@@ -73,22 +72,8 @@ std::string cell(const std::vector<std::vector<std::string>>& csv, std::size_t r
   return csv.at(r).at(std::size_t(it - header.begin()));
 }
 
-struct CommandRun {
-  int status = -1;
-  std::string output;
-};
-
-CommandRun run_command(const std::string& args) {
-  const std::string command = std::string(MORPHMAP_BINARY) + " " + args + " 2>&1";
-  CommandRun r;
-  FILE* pipe = popen(command.c_str(), "r");
-  if (!pipe) return r;
-  std::array<char, 4096> buffer{};
-  while (fgets(buffer.data(), int(buffer.size()), pipe)) r.output += buffer.data();
-  const int raw = pclose(pipe);
-  r.status = WIFEXITED(raw) ? WEXITSTATUS(raw) : -1;
-  return r;
-}
+using test::CommandRun;
+using test::run_command;
 
 // Starts `morphmap batch manifest -o out` in the background, output discarded.
 pid_t start_batch(const fs::path& manifest, const fs::path& out) {
@@ -124,12 +109,7 @@ const char* kTiny = R"("source": "sphere", "target": "torus", "voxels": 8, "time
 
 class Batch : public ::testing::Test {
  protected:
-  void SetUp() override {
-    dir_ = fs::temp_directory_path() / ("morphmap_batch_" + std::to_string(::getpid()) + "_" +
-                                        ::testing::UnitTest::GetInstance()->current_test_info()->name());
-    fs::remove_all(dir_);
-    fs::create_directories(dir_);
-  }
+  void SetUp() override { dir_ = test::fresh_test_dir("morphmap_batch_"); }
   void TearDown() override { fs::remove_all(dir_); }
   fs::path write(const std::string& name, const std::string& text) {
     const fs::path p = dir_ / name;

@@ -3,13 +3,10 @@
 #include "io/render.h"
 
 #include <gtest/gtest.h>
-#include <sys/wait.h>
 #include <tbb/global_control.h>
-#include <unistd.h>
 
 #include <array>
 #include <cmath>
-#include <cstdio>
 #include <filesystem>
 #include <fstream>
 #include <memory>
@@ -18,6 +15,7 @@
 #include "io/image.h"
 #include "mesh/errors.h"
 #include "mesh/shapes.h"
+#include "tests/command_line.h"
 
 namespace fs = std::filesystem;
 
@@ -224,30 +222,13 @@ TEST(Render, RejectsWhatItCannotDraw) {
 }
 
 // The command line: exit 2 with one line naming the file, and no PNG left behind.
-struct CommandRun {
-  int status = -1;
-  std::string output;
-};
-
-CommandRun run_command(const std::string& args) {
-  const std::string command = std::string(MORPHMAP_BINARY) + " " + args + " 2>&1";
-  CommandRun r;
-  FILE* pipe = popen(command.c_str(), "r");
-  if (!pipe) return r;
-  std::array<char, 4096> buffer{};
-  while (fgets(buffer.data(), int(buffer.size()), pipe)) r.output += buffer.data();
-  const int raw = pclose(pipe);
-  r.status = WIFEXITED(raw) ? WEXITSTATUS(raw) : -1;
-  return r;
-}
+using test::CommandRun;
+using test::run_command;
 
 class RenderCli : public ::testing::Test {
  protected:
   void SetUp() override {
-    dir_ = fs::temp_directory_path() / ("morphmap_render_" + std::to_string(::getpid()) + "_" +
-                                        ::testing::UnitTest::GetInstance()->current_test_info()->name());
-    fs::remove_all(dir_);
-    fs::create_directories(dir_);
+    dir_ = test::fresh_test_dir("morphmap_render_");
     std::ofstream(dir_ / "quad.obj") << "v -1 -1 0\nv 1 -1 0\nv 1 1 0\nv -1 1 0\nvt 0 0\nvt 1 0\nvt 1 1\nvt 0 1\n"
                                         "f 1/1 2/2 3/3\nf 1/1 3/3 4/4\n";
     // A closed octahedron: the source of a stretch map must be closed.
