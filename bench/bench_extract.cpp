@@ -20,11 +20,9 @@
 namespace {
 
 morphmap::MorphField sphere_to_torus(int n) {
-  return morphmap::sample_morph([](const Eigen::Vector3d& p) { return p.norm() - 0.9; },
-                                [](const Eigen::Vector3d& p) {
-                                  return Eigen::Vector2d(p.head<2>().norm() - 0.6, p.z()).norm() - 0.25;
-                                },
-                                1.1, n);
+  return morphmap::sample_morph(
+      [](const Eigen::Vector3d& p) { return p.norm() - 0.9; },
+      [](const Eigen::Vector3d& p) { return Eigen::Vector2d(p.head<2>().norm() - 0.6, p.z()).norm() - 0.25; }, 1.1, n);
 }
 
 std::string models_dir() {
@@ -71,7 +69,12 @@ void run(benchmark::State& state, const morphmap::MorphField& field, int time_st
 void BM_ExtractSphereTorus(benchmark::State& state) {
   run(state, sphere_to_torus(int(state.range(0))), int(state.range(1)));
 }
-BENCHMARK(BM_ExtractSphereTorus)->Args({32, 8})->Args({64, 16})->Args({96, 24})->Unit(benchmark::kMillisecond)->UseRealTime();
+BENCHMARK(BM_ExtractSphereTorus)
+    ->Args({32, 8})
+    ->Args({64, 16})
+    ->Args({96, 24})
+    ->Unit(benchmark::kMillisecond)
+    ->UseRealTime();
 
 void BM_ExtractSphereBunny(benchmark::State& state) {
   const morphmap::MorphField* field = sphere_to_bunny(int(state.range(0)));
@@ -81,6 +84,11 @@ void BM_ExtractSphereBunny(benchmark::State& state) {
   }
   run(state, *field, int(state.range(1)));
 }
-BENCHMARK(BM_ExtractSphereBunny)->Args({40, 8})->Args({80, 16})->Args({120, 24})->Unit(benchmark::kMillisecond)->UseRealTime();
+BENCHMARK(BM_ExtractSphereBunny)
+    ->Args({40, 8})
+    ->Args({80, 16})
+    ->Args({120, 24})
+    ->Unit(benchmark::kMillisecond)
+    ->UseRealTime();
 
 }  // namespace

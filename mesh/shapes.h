@@ -14,13 +14,13 @@ namespace morphmap {
 /// (subdivisions along a great circle), torus r_ratio (minor / major radius), two-spheres
 /// gap_ratio (gap between spheres / sphere radius). Unknown shapes or keys throw InvalidInput.
 struct ShapeSpec {
-  std::string kind;                         ///< "sphere", "torus" or "two-spheres"
-  std::optional<Eigen::Vector3d> center;    ///< default: centre of the box to fit, else origin
-  std::optional<double> size;               ///< half of the largest extent; default: fits the box, else 1
-  int resolution = 96;                      ///< segments around a full circle
-  double r_ratio = 0.4;                     ///< torus: minor radius / major radius
-  double gap_ratio = 0.5;                   ///< two-spheres: gap between the spheres / sphere radius
-  bool texture = true;                      ///< sphere: lat-long UVs and a generated checkerboard texture
+  std::string kind;                       ///< "sphere", "torus" or "two-spheres"
+  std::optional<Eigen::Vector3d> center;  ///< default: centre of the box to fit, else origin
+  std::optional<double> size;             ///< half of the largest extent; default: fits the box, else 1
+  int resolution = 96;                    ///< segments around a full circle
+  double r_ratio = 0.4;                   ///< torus: minor radius / major radius
+  double gap_ratio = 0.5;                 ///< two-spheres: gap between the spheres / sphere radius
+  bool texture = true;                    ///< sphere: lat-long UVs and a generated checkerboard texture
 };
 
 /// True when `arg` names a built-in shape (its text before ':' is a known kind).

@@ -11,13 +11,13 @@ namespace morphmap {
 
 /// A triangle surface cut from the tet mesh, with per-vertex labels and provenance.
 struct SliceMesh {
-  Eigen::MatrixXd V;              ///< #V by 3 positions (x, y, z)
-  TriIndices F;                   ///< #F by 3, counter-clockwise seen from outside (outward normals)
-  Eigen::MatrixXd labels;         ///< #V by 3 labels interpolated from the tet mesh (empty if none given)
-  std::vector<int> source_tet;    ///< #F: tet of the mesh the triangle comes from
-  Eigen::MatrixXi source_edge;    ///< #V by 2: mesh vertices (a, b) whose edge holds the vertex (a == b on a mesh vertex)
-  Eigen::VectorXd edge_weight;    ///< #V: position = (1 - w) * V(a) + w * V(b)
-  double t = 1.0;                 ///< morph time of the slice
+  Eigen::MatrixXd V;            ///< #V by 3 positions (x, y, z)
+  TriIndices F;                 ///< #F by 3, counter-clockwise seen from outside (outward normals)
+  Eigen::MatrixXd labels;       ///< #V by 3 labels interpolated from the tet mesh (empty if none given)
+  std::vector<int> source_tet;  ///< #F: tet of the mesh the triangle comes from
+  Eigen::MatrixXi source_edge;  ///< #V by 2: mesh vertices (a, b) whose edge holds the vertex (a == b on a mesh vertex)
+  Eigen::VectorXd edge_weight;  ///< #V: position = (1 - w) * V(a) + w * V(b)
+  double t = 1.0;               ///< morph time of the slice
 };
 
 /// The boundary of the tet mesh at t = 1 (vertices with side B), i.e. the extracted B. Labels are

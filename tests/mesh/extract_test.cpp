@@ -114,11 +114,14 @@ TEST(Extract, OrientationPointsTowardIncreasingField) {
   std::int64_t outward = 0, inward = 0;
   for (Eigen::Index t = 0; t < mesh.tet_count(); ++t) {
     const Eigen::Vector4d v0 = mesh.V.row(mesh.T(t, 0)).transpose();
-    const Eigen::Vector4d n = cross4(mesh.V.row(mesh.T(t, 1)).transpose() - v0,
-                                     mesh.V.row(mesh.T(t, 2)).transpose() - v0,
-                                     mesh.V.row(mesh.T(t, 3)).transpose() - v0);
-    const Eigen::Vector3d c = (mesh.V.row(mesh.T(t, 0)) + mesh.V.row(mesh.T(t, 1)) + mesh.V.row(mesh.T(t, 2)) +
-                               mesh.V.row(mesh.T(t, 3))).head<3>().transpose() / 4.0;
+    const Eigen::Vector4d n =
+        cross4(mesh.V.row(mesh.T(t, 1)).transpose() - v0, mesh.V.row(mesh.T(t, 2)).transpose() - v0,
+               mesh.V.row(mesh.T(t, 3)).transpose() - v0);
+    const Eigen::Vector3d c =
+        (mesh.V.row(mesh.T(t, 0)) + mesh.V.row(mesh.T(t, 1)) + mesh.V.row(mesh.T(t, 2)) + mesh.V.row(mesh.T(t, 3)))
+            .head<3>()
+            .transpose() /
+        4.0;
     if (n.norm() < 1e-12) continue;
     (n.head<3>().dot(c) > 0.0 ? outward : inward) += 1;
   }

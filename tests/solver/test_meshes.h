@@ -18,10 +18,10 @@ namespace morphmap::test {
 struct BoxSpec {
   int nx = 2, ny = 2, nz = 2;
   double sx = 1.0, sy = 1.0;
-  double height = 1.0;                          ///< extent along tau
+  double height = 1.0;  ///< extent along tau
   Eigen::Vector4d origin = Eigen::Vector4d::Zero();
-  bool flag_ends = true;                        ///< k = 0 -> side A, k = nz -> side B; else all Interior
-  double time_scale = 0.0;                      ///< c of the mesh; 0 means "height", so t = k / nz
+  bool flag_ends = true;    ///< k = 0 -> side A, k = nz -> side B; else all Interior
+  double time_scale = 0.0;  ///< c of the mesh; 0 means "height", so t = k / nz
 };
 
 /// Structured Kuhn (Freudenthal) tetrahedralisation: 6 tets per cube along the monotone paths from corner 000
@@ -38,8 +38,8 @@ inline TetMesh4 make_box_mesh(const BoxSpec& spec) {
     for (int j = 0; j <= ny; ++j) {
       for (int i = 0; i <= nx; ++i) {
         const int v = id(i, j, k);
-        mesh.V.row(v) = spec.origin.transpose() +
-                        Eigen::RowVector4d(spec.sx * i / nx, spec.sy * j / ny, 0.0, spec.height * k / nz);
+        mesh.V.row(v) =
+            spec.origin.transpose() + Eigen::RowVector4d(spec.sx * i / nx, spec.sy * j / ny, 0.0, spec.height * k / nz);
         if (spec.flag_ends && k == 0) mesh.side[static_cast<std::size_t>(v)] = VertexSide::A;
         if (spec.flag_ends && k == nz) mesh.side[static_cast<std::size_t>(v)] = VertexSide::B;
       }
