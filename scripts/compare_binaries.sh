@@ -9,7 +9,7 @@
 #   usage: scripts/compare_binaries.sh MODELS_DIR OLD_BINARY NEW_BINARY [ROUNDS] [JOB...]
 #   ROUNDS defaults to 3; JOBs are names from table2_jobs.sh (sphere-torus, sphere-bunny, splitting-sphere,
 #   sphere-buddha, cow-horse), all five by default. Outputs go to a temporary folder, removed at the end, or to
-#   $COMPARE_OUT when that is set (kept).
+#   $COMPARE_OUT when that is set (kept; its old-<k> and new-<k> folders are replaced).
 # Build the old binary from a commit in a separate worktree, e.g.
 #   git worktree add /tmp/old HEAD~1 && cmake -S /tmp/old -B /tmp/old/build -G Ninja && ninja -C /tmp/old/build morphmap
 set -euo pipefail
@@ -63,6 +63,8 @@ for ((round = 1; round <= rounds; ++round)); do
     bin="$old"
     [ "$tag" = new ] && bin="$new"
     [ -t 2 ] && printf '\rround %d of %d: %s binary   ' "$round" "$rounds" "$tag" >&2
+    # A fresh folder: batch would skip (resume) a job whose folder holds a complete report from an earlier run.
+    rm -rf "${out:?}/$tag-$round"
     "$bin" batch "$out/manifest.json" -o "$out/$tag-$round" >/dev/null || status=$?
   done
 done
