@@ -65,15 +65,6 @@ using PackedStiffness = Eigen::Matrix<double, Eigen::Dynamic, 6, Eigen::RowMajor
 /// The 4 by 4 local stiffness K of one PackedStiffness row (`packed`, 6 entries): K(0, i) = K(i, 0) = -(K(i, 1) +
 /// K(i, 2) + K(i, 3)) and K(0, 0) = -(K(0, 1) + K(0, 2) + K(0, 3)). Bitwise symmetric, so an assembly that reads (i, j)
 /// and (j, i) from it stays bitwise symmetric.
-/// Entry (i, j), i != j, of unpack_stiffness's K alone, computed as it computes it (the same bits).
-inline double stiffness_entry(const double* packed, int i, int j) {
-  // Row-major index of (a, b), 1 <= a, b <= 3, in the packed upper triangle.
-  constexpr int kBlock[3][3] = {{0, 1, 2}, {1, 3, 4}, {2, 4, 5}};
-  if (i > j) std::swap(i, j);
-  if (i > 0) return packed[kBlock[i - 1][j - 1]];
-  return -(packed[kBlock[j - 1][0]] + packed[kBlock[j - 1][1]] + packed[kBlock[j - 1][2]]);
-}
-
 inline void unpack_stiffness(const double* packed, double K[4][4]) {
   K[1][1] = packed[0];
   K[1][2] = K[2][1] = packed[1];
@@ -83,6 +74,15 @@ inline void unpack_stiffness(const double* packed, double K[4][4]) {
   K[3][3] = packed[5];
   for (int i = 1; i < 4; ++i) K[0][i] = K[i][0] = -(K[i][1] + K[i][2] + K[i][3]);
   K[0][0] = -(K[0][1] + K[0][2] + K[0][3]);
+}
+
+/// Entry (i, j), i != j, of unpack_stiffness's K alone, computed as it computes it (the same bits).
+inline double stiffness_entry(const double* packed, int i, int j) {
+  // Row-major index of (a, b), 1 <= a, b <= 3, in the packed upper triangle.
+  constexpr int kBlock[3][3] = {{0, 1, 2}, {1, 3, 4}, {2, 4, 5}};
+  if (i > j) std::swap(i, j);
+  if (i > 0) return packed[kBlock[i - 1][j - 1]];
+  return -(packed[kBlock[j - 1][0]] + packed[kBlock[j - 1][1]] + packed[kBlock[j - 1][2]]);
 }
 
 /// measure_quality's figures from the stiffness the Laplace stage computes anyway (solve_harmonic with
