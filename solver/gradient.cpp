@@ -71,14 +71,20 @@ GradientResult compute_gradient(const TetMesh4& mesh, const Eigen::VectorXd& s, 
   }
 
   GradientResult result;
-  result.tet_gradient.setZero(tets, 4);
-  result.tet_volume.setZero(tets);
+  // Sized without zeroing, every row written by the parallel loop: a serial setZero was the first write to 66 MB
+  // on cow -> horse, and first writes cost most on these virtual machines (docs/performance_log.md, 2026-12-03).
+  result.tet_gradient.resize(tets, 4);
+  result.tet_volume.resize(tets);
   tbb::parallel_for(Eigen::Index(0), tets, [&](Eigen::Index t) {
     Eigen::Matrix<double, 4, 3> E;
     Eigen::Matrix3d gram_inverse;
     double volume = 0.0;
     // Degenerate tets have no hull to take a gradient in: zero gradient, zero weight.
-    if (!tet_frame(V, T, t, E, gram_inverse, volume)) return;
+    if (!tet_frame(V, T, t, E, gram_inverse, volume)) {
+      result.tet_gradient.row(t).setZero();
+      result.tet_volume(t) = 0.0;
+      return;
+    }
     const Eigen::Vector3d ds(s(T(t, 1)) - s(T(t, 0)), s(T(t, 2)) - s(T(t, 0)), s(T(t, 3)) - s(T(t, 0)));
     // With E = Q R, E (E^T E)^-1 ds = Q R^-T ds: the QR form has E's conditioning instead of its square,
     // which matters on the slivers next to lattice points (identity morph: T off by 3e-9 with the Gram inverse).

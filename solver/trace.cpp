@@ -209,8 +209,12 @@ class Tracer {
         adj_(*stars_),
         normals_(vertex_normals(mesh, adj_)),
         across_(new std::atomic<int>[std::size_t(mesh.tet_count()) * 4]) {
-    for (std::size_t i = 0; i < std::size_t(mesh.tet_count()) * 4; ++i)
-      across_[i].store(kUnknown, std::memory_order_relaxed);
+    // In parallel: the first write to 27 MB on cow -> horse (first writes cost most on these virtual machines).
+    tbb::parallel_for(tbb::blocked_range<std::size_t>(0, std::size_t(mesh.tet_count()) * 4),
+                      [&](const tbb::blocked_range<std::size_t>& r) {
+                        for (std::size_t i = r.begin(); i < r.end(); ++i)
+                          across_[i].store(kUnknown, std::memory_order_relaxed);
+                      });
     field_ = field;
     for (int pass = 0; pass < options.field_smoothing; ++pass) field_ = smooth_field(mesh, adj_, field_);
   }
