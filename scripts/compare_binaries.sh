@@ -9,7 +9,10 @@
 #   usage: scripts/compare_binaries.sh MODELS_DIR OLD_BINARY NEW_BINARY [ROUNDS] [JOB...]
 #   ROUNDS defaults to 3; JOBs are names from table2_jobs.sh (sphere-torus, sphere-bunny, splitting-sphere,
 #   sphere-buddha, cow-horse), all five by default. Outputs go to a temporary folder, removed at the end, or to
-#   $COMPARE_OUT when that is set (kept; its old-<k> and new-<k> folders are replaced).
+#   $COMPARE_OUT when that is set (kept; its old-<k> and new-<k> folders are replaced). $COMPARE_IDLE=S sleeps S
+#   seconds before every batch, so that (with one JOB) every run starts on memory the host has taken back, as a run
+#   after an idle spell does (docs/performance_log.md, 2026-12-03 (late night): 0.3 s of cow -> horse); without it
+#   the runs follow each other and mostly reuse the memory the previous one freed.
 # Build the old binary from a commit in a separate worktree, e.g.
 #   git worktree add /tmp/old HEAD~1 && cmake -S /tmp/old -B /tmp/old/build -G Ninja && ninja -C /tmp/old/build morphmap
 set -euo pipefail
@@ -27,6 +30,8 @@ old="$(cd "$(dirname "$2")" && pwd)/$(basename "$2")"
 new="$(cd "$(dirname "$3")" && pwd)/$(basename "$3")"
 rounds="${4:-3}"
 case "$rounds" in '' | *[!0-9]* | 0) echo "$0: ROUNDS must be a positive integer, not '$rounds'" >&2; exit 2 ;; esac
+idle="${COMPARE_IDLE:-0}"
+case "$idle" in '' | *[!0-9]*) echo "$0: COMPARE_IDLE must be a whole number of seconds, not '$idle'" >&2; exit 2 ;; esac
 shift $(($# < 4 ? $# : 4))
 repo="$(cd "$(dirname "$0")/.." && pwd)"
 # shellcheck source=scripts/table2_jobs.sh
@@ -65,6 +70,7 @@ for ((round = 1; round <= rounds; ++round)); do
     [ -t 2 ] && printf '\rround %d of %d: %s binary   ' "$round" "$rounds" "$tag" >&2
     # A fresh folder: batch would skip (resume) a job whose folder holds a complete report from an earlier run.
     rm -rf "${out:?}/$tag-$round"
+    [ "$idle" -gt 0 ] && sleep "$idle"
     "$bin" batch "$out/manifest.json" -o "$out/$tag-$round" >/dev/null || status=$?
   done
 done
