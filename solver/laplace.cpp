@@ -81,15 +81,23 @@ void local_stiffness(const Points4& V, const TetIndices& T, PackedStiffness& L, 
   });
 }
 
+/// Which tets carry stiffness (volume > 0), one byte a tet: the assembly's test, kept instead of the 8-byte volumes,
+/// which the assembly does not otherwise read, so they can be released before the matrix is allocated.
+std::vector<std::uint8_t> stiffness_mask(const Eigen::VectorXd& vol) {
+  std::vector<std::uint8_t> mask(static_cast<std::size_t>(vol.size()));
+  for (Eigen::Index t = 0; t < vol.size(); ++t) mask[static_cast<std::size_t>(t)] = vol(t) > 0.0 ? 1 : 0;
+  return mask;
+}
+
 /// Rows of K = sum of local stiffness restricted to the `unknown` vertices (#V entries: the row/column index of
 /// the vertex, or -1 for a fixed vertex), assembled straight into compressed storage: A (#unknowns square,
 /// both triangles) and, when b is given, b = -K_IB s with the fixed vertices' values s. Written by hand because
 /// Eigen's setFromTriplets is sequential and needs a 16-entry triplet per tet (256 bytes a tet); here every row
 /// is one task: it walks its vertex's star (tets with stiffness, in tet order), so each entry is summed in the same
 /// order whatever the thread count, and (i, j) and (j, i) add the same doubles in the same order.
-void assemble_rows(const TetIndices& T, const VertexTets& stars, const PackedStiffness& L, const Eigen::VectorXd& vol,
-                   const std::vector<int>& unknown, int unknowns, const Eigen::VectorXd* s, SparseMatrixD& A,
-                   Eigen::VectorXd* b) {
+void assemble_rows(const TetIndices& T, const VertexTets& stars, const PackedStiffness& L,
+                   const std::vector<std::uint8_t>& has_stiffness, const std::vector<int>& unknown, int unknowns,
+                   const Eigen::VectorXd* s, SparseMatrixD& A, Eigen::VectorXd* b) {
   const Eigen::Index n = static_cast<Eigen::Index>(unknown.size());
   // Vertex of each unknown, in unknown order (the numbering is monotone in the vertex index).
   std::vector<int> vertex_of(static_cast<std::size_t>(unknowns));
@@ -112,7 +120,7 @@ void assemble_rows(const TetIndices& T, const VertexTets& stars, const PackedSti
     double rhs = 0.0;
     for (std::int64_t q = stars.first(v); q < stars.last(v); ++q) {
       const int t = stars.tet(q);
-      if (!(vol(t) > 0.0)) continue;  // degenerate: no stiffness
+      if (!has_stiffness[std::size_t(t)]) continue;  // degenerate
       int li = 0;
       while (T(t, li) != v) ++li;
       double K[4][4];
@@ -220,7 +228,7 @@ SparseMatrixD cotangent_stiffness(const Points4& V, const TetIndices& T) {
   std::vector<int> all(static_cast<std::size_t>(V.rows()));
   std::iota(all.begin(), all.end(), 0);
   SparseMatrixD K;
-  assemble_rows(T, build_vertex_tets(T, V.rows()), L, vol, all, int(V.rows()), nullptr, K, nullptr);
+  assemble_rows(T, build_vertex_tets(T, V.rows()), L, stiffness_mask(vol), all, int(V.rows()), nullptr, K, nullptr);
   return K;
 }
 
@@ -252,44 +260,52 @@ DirichletSystem dirichlet_system(const TetMesh4& mesh, const SharedStars& stars,
     quality_seconds = quality->seconds;
   }
 
-  // Components through tets that carry stiffness only: a vertex held by degenerate tets alone would have
-  // an empty row in K, so it must count as its own (floating) component.
-  DisjointSets sets(n);
-  for (Eigen::Index t = 0; t < T.rows(); ++t) {
-    if (!(vol(t) > 0.0)) continue;
-    for (int k = 1; k < 4; ++k) sets.unite(T(t, 0), T(t, k));
-  }
-  std::vector<Eigen::Index> root(static_cast<std::size_t>(n));
-  std::vector<char> anchored(static_cast<std::size_t>(n), 0);  // per root: touches A or B
-  std::vector<double> time_sum(static_cast<std::size_t>(n), 0.0);
-  std::vector<Eigen::Index> size(static_cast<std::size_t>(n), 0);
-  for (Eigen::Index i = 0; i < n; ++i) {
-    const auto r = static_cast<std::size_t>(sets.find(i));
-    root[static_cast<std::size_t>(i)] = static_cast<Eigen::Index>(r);
-    if (mesh.side[static_cast<std::size_t>(i)] != VertexSide::Interior) anchored[r] = 1;
-    time_sum[r] += mesh.time_of(i);
-    ++size[r];
-  }
+  // The assembly reads only which tets carry stiffness: the volumes (8 bytes a tet) and, below, the component
+  // tables (24 bytes a vertex) are released before it allocates the matrix, at what is the run's peak of memory
+  // (the local stiffness is live then).
+  const std::vector<std::uint8_t> has_stiffness = stiffness_mask(vol);
+  vol = Eigen::VectorXd();
 
-  // Unknowns: interior vertices of anchored components, numbered in vertex order.
-  system.s.setZero(n);
-  system.unknown.assign(static_cast<std::size_t>(n), -1);
   int unknowns = 0;
-  for (Eigen::Index i = 0; i < n; ++i) {
-    const auto r = static_cast<std::size_t>(root[static_cast<std::size_t>(i)]);
-    const VertexSide side = mesh.side[static_cast<std::size_t>(i)];
-    if (side == VertexSide::A) {
-      system.s(i) = 0.0;
-    } else if (side == VertexSide::B) {
-      system.s(i) = 1.0;
-    } else if (!anchored[r]) {
-      // A component born and dying inside the morph has no boundary data: its harmonic s is any constant.
-      // Its mean morph time keeps it ordered with the rest of the morph for the causal sweep.
-      system.s(i) = time_sum[r] / static_cast<double>(size[r]);
-      ++system.floating_vertices;
-      if (static_cast<std::size_t>(i) == r) ++system.floating_components;
-    } else {
-      system.unknown[static_cast<std::size_t>(i)] = unknowns++;
+  {
+    // Components through tets that carry stiffness only: a vertex held by degenerate tets alone would have
+    // an empty row in K, so it must count as its own (floating) component.
+    DisjointSets sets(n);
+    for (Eigen::Index t = 0; t < T.rows(); ++t) {
+      if (!has_stiffness[static_cast<std::size_t>(t)]) continue;
+      for (int k = 1; k < 4; ++k) sets.unite(T(t, 0), T(t, k));
+    }
+    std::vector<Eigen::Index> root(static_cast<std::size_t>(n));
+    std::vector<char> anchored(static_cast<std::size_t>(n), 0);  // per root: touches A or B
+    std::vector<double> time_sum(static_cast<std::size_t>(n), 0.0);
+    std::vector<Eigen::Index> size(static_cast<std::size_t>(n), 0);
+    for (Eigen::Index i = 0; i < n; ++i) {
+      const auto r = static_cast<std::size_t>(sets.find(i));
+      root[static_cast<std::size_t>(i)] = static_cast<Eigen::Index>(r);
+      if (mesh.side[static_cast<std::size_t>(i)] != VertexSide::Interior) anchored[r] = 1;
+      time_sum[r] += mesh.time_of(i);
+      ++size[r];
+    }
+
+    // Unknowns: interior vertices of anchored components, numbered in vertex order.
+    system.s.setZero(n);
+    system.unknown.assign(static_cast<std::size_t>(n), -1);
+    for (Eigen::Index i = 0; i < n; ++i) {
+      const auto r = static_cast<std::size_t>(root[static_cast<std::size_t>(i)]);
+      const VertexSide side = mesh.side[static_cast<std::size_t>(i)];
+      if (side == VertexSide::A) {
+        system.s(i) = 0.0;
+      } else if (side == VertexSide::B) {
+        system.s(i) = 1.0;
+      } else if (!anchored[r]) {
+        // A component born and dying inside the morph has no boundary data: its harmonic s is any constant.
+        // Its mean morph time keeps it ordered with the rest of the morph for the causal sweep.
+        system.s(i) = time_sum[r] / static_cast<double>(size[r]);
+        ++system.floating_vertices;
+        if (static_cast<std::size_t>(i) == r) ++system.floating_components;
+      } else {
+        system.unknown[static_cast<std::size_t>(i)] = unknowns++;
+      }
     }
   }
 
@@ -299,7 +315,7 @@ DirichletSystem dirichlet_system(const TetMesh4& mesh, const SharedStars& stars,
     const int uj = system.unknown[static_cast<std::size_t>(j)];
     if (uj >= 0) system.x0(uj) = mesh.time_of(j);
   }
-  assemble_rows(T, *shared_stars, L, vol, system.unknown, unknowns, &system.s, system.A, &system.b);
+  assemble_rows(T, *shared_stars, L, has_stiffness, system.unknown, unknowns, &system.s, system.A, &system.b);
   system.assemble_seconds = seconds_since(assemble_start) - quality_seconds;
   return system;
 }
