@@ -25,6 +25,9 @@ struct ExtractOptions {
   /// Called once the exact tet and vertex counts are known, before the mesh arrays are allocated; may
   /// throw (the pipeline's --max-memory guard does). Empty = no check.
   std::function<void(std::int64_t tets, std::int64_t vertices)> before_allocate;
+  /// Also record each tet's lattice cell and Kuhn simplex (TetMesh4::source_cell): 8 bytes a tet, live for the whole
+  /// run, that no stage of the pipeline reads (off: source_cell stays empty).
+  bool record_source_cells = false;
 };
 
 struct ExtractResult {

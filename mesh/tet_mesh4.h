@@ -25,7 +25,8 @@ using TriIndices = Eigen::Matrix<int, Eigen::Dynamic, 3, Eigen::RowMajor>;
 struct TetMesh4 {
   Points4 V;                              ///< #V by 4: x, y, z, tau (tau = time_scale * t)
   TetIndices T;                           ///< #T by 4 vertex indices, oriented as above
-  std::vector<std::int64_t> source_cell;  ///< #T: 24 * (linear index of the 4D lattice cell) + Kuhn simplex 0..23
+  std::vector<std::int64_t> source_cell;  ///< #T: 24 * (linear index of the 4D lattice cell) + Kuhn simplex 0..23,
+                                          ///< or empty (ExtractOptions::record_source_cells)
   std::vector<VertexSide> side;           ///< #V: A for t = 0, B for t = 1, Interior otherwise
   double time_scale = 1.0;                ///< c: length in R^4 of one unit of morph time t
   double voxel_size = 0.0;                ///< h: spatial lattice spacing

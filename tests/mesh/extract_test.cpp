@@ -71,6 +71,7 @@ TEST_P(ExtractManifold, InteriorFacesSharedByTwoTetsBoundaryOnlyAtEnds) {
   const MorphField field = analytic_field(c.a, c.b, 1.05, h);
   ExtractOptions options;
   options.time_steps = c.time_steps;
+  options.record_source_cells = true;
   const ExtractResult result = extract_hypersurface(field, options);
   const TetMesh4& mesh = result.mesh;
   ASSERT_GT(mesh.tet_count(), 100) << c.name;
@@ -133,6 +134,7 @@ TEST(Extract, IdenticalForOneAndTwoThreads) {
   const MorphField field = analytic_field(sphere(0.8), torus(0.55, 0.22), 1.05, 0.1);
   ExtractOptions options;
   options.time_steps = 5;
+  options.record_source_cells = true;
   TetMesh4 one, two;
   {
     tbb::global_control c(tbb::global_control::max_allowed_parallelism, 1);
@@ -146,7 +148,24 @@ TEST(Extract, IdenticalForOneAndTwoThreads) {
   ASSERT_EQ(one.T.rows(), two.T.rows());
   EXPECT_TRUE((one.V.array() == two.V.array()).all());
   EXPECT_TRUE((one.T.array() == two.T.array()).all());
+  ASSERT_EQ(one.source_cell.size(), std::size_t(one.tet_count()));
   EXPECT_EQ(one.source_cell, two.source_cell);
+}
+
+TEST(Extract, SourceCellsOnlyWhenAsked) {
+  const MorphField field = analytic_field(sphere(0.8), torus(0.55, 0.22), 1.05, 0.1);
+  ExtractOptions options;
+  options.time_steps = 5;
+  const TetMesh4 plain = extract_hypersurface(field, options).mesh;
+  options.record_source_cells = true;
+  const TetMesh4 recorded = extract_hypersurface(field, options).mesh;
+  EXPECT_TRUE(plain.source_cell.empty());
+  ASSERT_EQ(recorded.source_cell.size(), std::size_t(recorded.tet_count()));
+  // Recording changes nothing else.
+  ASSERT_EQ(plain.T.rows(), recorded.T.rows());
+  EXPECT_TRUE((plain.T.array() == recorded.T.array()).all());
+  EXPECT_TRUE((plain.V.array() == recorded.V.array()).all());
+  EXPECT_GE(*std::min_element(recorded.source_cell.begin(), recorded.source_cell.end()), 0);
 }
 
 TEST(Extract, NoCrossingThrows) {
