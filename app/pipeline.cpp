@@ -169,11 +169,13 @@ std::string gib(double bytes) {
 }  // namespace
 
 long long estimate_peak_memory(std::int64_t lattice_points, std::int64_t tets, std::int64_t vertices) {
-  // Fitted to report.json peak_memory_bytes (since the local stiffness is packed in 48 bytes a tet) with 9-17% to
-  // spare: demo 0.451 GB (2.37M tets, 0.41M vertices), sphere -> bunny 0.441 GB (2.45M, 0.43M), cow -> horse 0.311
-  // GB (1.66M, 0.30M) and at 160 voxels and 16 steps 3.26 GB (21.0M, 3.6M, 3.8M lattice points). Per tet: the mesh,
-  // the stars, the local stiffness and the CSC matrix; per vertex: positions, s, solver vectors, the field, labels.
-  constexpr double kBase = 80e6, kPerLatticePoint = 12.0, kPerTet = 145.0, kPerVertex = 160.0;
+  // Fitted to report.json peak_memory_bytes (refitted 2026-12-03, late night, after the source cells, the volumes,
+  // the deflation's triplets and the writers' whole-file buffers left the peak) with 7-17% to spare: demo 0.401 GB
+  // (2.37M tets, 0.41M vertices), sphere -> bunny 0.414 GB (2.45M, 0.43M), cow -> horse 0.299 GB (1.66M, 0.30M), at
+  // 160 voxels and 16 steps 3.06 GB (21.0M, 3.6M, 3.8M lattice points), and the demo at 20 voxels and 5 steps
+  // 0.132 GB (0.34M tets; the base is the libraries and, there, rendering the contact sheet). Per tet: the mesh, the
+  // stars, the local stiffness and the CSC matrix; per vertex: positions, s, solver vectors, the field, labels.
+  constexpr double kBase = 95e6, kPerLatticePoint = 12.0, kPerTet = 122.0, kPerVertex = 160.0;
   return (long long)(kBase + kPerLatticePoint * double(lattice_points) + kPerTet * double(tets) +
                      kPerVertex * double(vertices));
 }

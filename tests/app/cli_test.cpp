@@ -297,6 +297,8 @@ TEST_F(Cli, DemoWritesEveryOutput) {
   EXPECT_TRUE(report["trace"].contains("stalled"));
   EXPECT_TRUE(report["trace"].contains("descended"));
   EXPECT_GT(report["peak_memory_bytes"].get<std::int64_t>(), 0);
+  // --max-memory refuses by the estimate, so it must not fall short of what the run then takes.
+  EXPECT_GE(report["memory_estimate_bytes"].get<std::int64_t>(), report["peak_memory_bytes"].get<std::int64_t>());
   // labels.txt has one line per vertex of target.obj.
   std::ifstream obj(out / "target.obj"), labels(out / "labels.txt");
   std::string line;
