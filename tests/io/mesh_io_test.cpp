@@ -307,6 +307,25 @@ TEST_F(MeshIoTest, PlyRoundTripIsExact) {
   EXPECT_FALSE(rb.has_uv());
 }
 
+TEST_F(MeshIoTest, WritersStreamFilesLargerThanTheirBuffer) {
+  // The writers hand their text to the file a megabyte at a time: files of several megabytes cross that boundary
+  // many times, mid-line included, and must still read back bit for bit.
+  const Surface sphere = make_shape(parse_shape_spec("sphere:res=320"), std::nullopt);
+  const TriIndices F = sphere.F, FUV = sphere.FUV;
+  const std::string obj = (dir_ / "big.obj").string(), ply = (dir_ / "big.ply").string();
+  write_obj(obj, sphere.V, F, sphere.UV, FUV, "");
+  write_ply(ply, sphere.V, F, Eigen::MatrixXd());
+  EXPECT_GT(fs::file_size(obj), std::uintmax_t(3) << 20);
+  EXPECT_GT(fs::file_size(ply), std::uintmax_t(2) << 20);
+  const Surface from_obj = read_surface(obj), from_ply = read_surface(ply);
+  EXPECT_EQ(from_obj.V, sphere.V);
+  EXPECT_EQ(from_obj.F, sphere.F);
+  EXPECT_EQ(from_obj.UV, sphere.UV);
+  EXPECT_EQ(from_obj.FUV, sphere.FUV);
+  EXPECT_EQ(from_ply.V, sphere.V);
+  EXPECT_EQ(from_ply.F, sphere.F);
+}
+
 TEST_F(MeshIoTest, WritersRejectBadInput) {
   Eigen::MatrixXd V = Eigen::MatrixXd::Zero(3, 3);
   TriIndices F(1, 3);
