@@ -383,12 +383,13 @@ ExtractResult extract_hypersurface(const MorphField& field, const ExtractOptions
 
   mesh.V.resize(vertex_count, 4);
   mesh.T.resize(tet_count, 4);
-  if (options.record_source_cells) mesh.source_cell.resize(std::size_t(tet_count));
   mesh.side.assign(std::size_t(vertex_count), VertexSide::Interior);
   advise_huge_pages(mesh.V.data(), std::size_t(mesh.V.size()) * sizeof(double));
   advise_huge_pages(mesh.T.data(), std::size_t(mesh.T.size()) * sizeof(int));
-  if (options.record_source_cells)
+  if (options.record_source_cells) {
+    mesh.source_cell.resize(std::size_t(tet_count));
     advise_huge_pages(mesh.source_cell.data(), mesh.source_cell.size() * sizeof(std::int64_t));
+  }
 
   // Vertex id of the crossing on edge (a, b) of the current cell, a subset of b: the edge belongs to the
   // cell whose lower corner is corner a (the top-slab cell for spatial edges at t = 1).
@@ -410,7 +411,6 @@ ExtractResult extract_hypersurface(const MorphField& field, const ExtractOptions
     int id[16][16];
   };
   tbb::enumerable_thread_specific<std::unique_ptr<EdgeCache>> caches([] { return std::make_unique<EdgeCache>(); });
-  const bool record_source = options.record_source_cells;
   for_each_active_cell([&](std::int64_t, std::size_t slot, const Cell& cell) {
     EdgeCache* cache = caches.local().get();
     const std::uint32_t serial = ++cache->serial;
@@ -444,7 +444,7 @@ ExtractResult extract_hypersurface(const MorphField& field, const ExtractOptions
       for (int e = 0; e < pc.edges; ++e) ids[e] = edge_id(pc.a[e], pc.b[e]);
       auto emit = [&](const int tet[4]) {
         mesh.T.row(row) << ids[tet[0]], ids[tet[1]], ids[tet[2]], ids[tet[3]];
-        if (record_source) mesh.source_cell[std::size_t(row)] = source_base + s;
+        if (options.record_source_cells) mesh.source_cell[std::size_t(row)] = source_base + s;
         ++row;
       };
       if (pc.edges == 4) {
