@@ -85,6 +85,12 @@ void add_pipeline_options(CLI::App& cmd, PipelineOptions& o) {
                  "paper's label propagation) or closest-point (no morph, the baseline)")
       ->check(CLI::IsMember({"trace", "upwind", "closest-point"}))
       ->capture_default_str();
+  cmd.add_option("--source-projection", o.source_projection,
+                 "How labels near the extracted source become points of the source mesh: inverse (the point whose "
+                 "closest point on the extracted source the label is: a shape morphed to itself maps to itself) or "
+                 "closest (the label's closest point)")
+      ->check(CLI::IsMember({"inverse", "closest"}))
+      ->capture_default_str();
   cmd.add_option("--trace-step", o.trace.step_variation,
                  "Characteristic tracing: largest change of the interpolated field over one Runge-Kutta step, "
                  "relative to its size")

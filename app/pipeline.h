@@ -43,6 +43,12 @@ struct PipelineOptions {
   /// to A exactly (solver/trace.h); "upwind" reads the paper's label propagation (§7, solver/transport.h);
   /// "closest-point" maps every vertex to its closest point of A (no morph: the baseline other tools use).
   std::string method = "trace";
+  /// How a label (a point on or near the extracted A: a trace's end, A's side of the upwind sweep) becomes a point of
+  /// A's mesh: "inverse" finds the point of A whose closest point on the extracted A it is (A's vertices are moved
+  /// to their closest points there and the label located among A's faces so moved), which undoes --target-mesh's
+  /// entry into B through closest points on the extracted B, so a morph of a shape to itself maps its vertices to
+  /// themselves; "closest" takes the label's closest point of A. The closest-point method always uses "closest".
+  std::string source_projection = "inverse";
   TransportOptions transport;      ///< upwind sweep tolerances (the sweep also labels the 4D mesh for seams)
   TraceOptions trace;              ///< characteristic tracing tolerances
   SeamOptions seams;               ///< topological and texture seam splitting of target.obj and slices (§8)

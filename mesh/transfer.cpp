@@ -208,6 +208,7 @@ bool visit_face(RTCPointQueryFunctionArguments* args) {
 
 struct SurfaceLocator::Impl {
   std::vector<Corners> faces;
+  std::vector<Corners> reported;  ///< the surface's own corners when the search runs on a moved copy, else empty
   Eigen::Vector3d shift = Eigen::Vector3d::Zero();  ///< box centre: Embree's float frame, precise near the mesh
   double extent = 0.0;                              ///< largest |coordinate| of a vertex in that frame
   // One device per locator: it takes 0.2 ms to create, and a shared static one would be released during static
@@ -224,22 +225,31 @@ struct SurfaceLocator::Impl {
   }
 };
 
-SurfaceLocator::SurfaceLocator(const Surface& surface) : impl_(std::make_unique<Impl>()) {
+SurfaceLocator::SurfaceLocator(const Surface& surface) : SurfaceLocator(surface, surface.V) {}
+
+SurfaceLocator::SurfaceLocator(const Surface& surface, const Eigen::MatrixXd& search_V)
+    : impl_(std::make_unique<Impl>()) {
   const std::string name = surface.name.empty() ? std::string("SurfaceLocator") : surface.name;
   if (surface.F.rows() == 0 || surface.V.rows() == 0) throw InvalidInput(name + ": empty surface");
   if (surface.F.cols() != 3 || surface.V.cols() != 3) throw InvalidInput(name + ": V and F must have 3 columns");
   if (surface.F.minCoeff() < 0 || surface.F.maxCoeff() >= surface.V.rows())
     throw InvalidInput(name + ": face index out of range");
   if (!surface.V.allFinite()) throw InvalidInput(name + ": non-finite vertex");
+  if (search_V.rows() != surface.V.rows() || search_V.cols() != 3 || !search_V.allFinite())
+    throw InvalidInput(name + ": the search positions must be #V by 3 and finite");
   Impl& m = *impl_;
+  const bool moved = &search_V != &surface.V;
   m.faces.resize(std::size_t(surface.F.rows()));
+  if (moved) m.reported.resize(m.faces.size());
   tbb::parallel_for(tbb::blocked_range<Eigen::Index>(0, surface.F.rows(), 4096),
                     [&](const tbb::blocked_range<Eigen::Index>& r) {
                       for (Eigen::Index f = r.begin(); f != r.end(); ++f)
-                        for (int k = 0; k < 3; ++k)
-                          m.faces[std::size_t(f)].p[k] = surface.V.row(surface.F(f, k)).transpose();
+                        for (int k = 0; k < 3; ++k) {
+                          m.faces[std::size_t(f)].p[k] = search_V.row(surface.F(f, k)).transpose();
+                          if (moved) m.reported[std::size_t(f)].p[k] = surface.V.row(surface.F(f, k)).transpose();
+                        }
                     });
-  const Eigen::AlignedBox3d box = bounding_box(surface.V);
+  const Eigen::AlignedBox3d box = bounding_box(search_V);
   m.shift = box.center();
   m.extent = (box.max() - m.shift).cwiseMax(m.shift - box.min()).maxCoeff();
   if (!(m.extent < kFloatReach)) return;  // closest() scans
@@ -264,8 +274,8 @@ SurfaceLocator::SurfaceLocator(const Surface& surface) : impl_(std::make_unique<
     throw_if_embree_failed(name + ": rtcSetNewGeometryBuffer", m.device);
     throw Error(name + ": rtcSetNewGeometryBuffer failed");
   }
-  for (Eigen::Index i = 0; i < surface.V.rows(); ++i)
-    for (int c = 0; c < 3; ++c) vertices[3 * i + c] = float(surface.V(i, c) - m.shift(c));
+  for (Eigen::Index i = 0; i < search_V.rows(); ++i)
+    for (int c = 0; c < 3; ++c) vertices[3 * i + c] = float(search_V(i, c) - m.shift(c));
   for (Eigen::Index f = 0; f < surface.F.rows(); ++f)
     for (int c = 0; c < 3; ++c) indices[3 * f + c] = unsigned(surface.F(f, c));
   rtcCommitGeometry(geometry);
@@ -316,6 +326,10 @@ SurfaceHit SurfaceLocator::closest_near(const Eigen::Vector3d& query, int hint) 
   hit.distance = (hit.point - query).norm();
   const Corners& t = m.faces[std::size_t(hit.face)];
   hit.barycentric = barycentric_of(hit.point, t.p[0], t.p[1], t.p[2]);
+  if (!m.reported.empty()) {
+    const Corners& r = m.reported[std::size_t(hit.face)];
+    hit.point = hit.barycentric(0) * r.p[0] + hit.barycentric(1) * r.p[1] + hit.barycentric(2) * r.p[2];
+  }
   return hit;
 }
 

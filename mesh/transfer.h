@@ -24,6 +24,10 @@ struct SurfaceHit {
 class SurfaceLocator {
  public:
   explicit SurfaceLocator(const Surface& surface);
+  /// Queries answered on a moved copy of `surface` (its faces over the vertex positions `search_V`, #V by 3) and
+  /// reported on `surface` itself, at the same face and barycentric weights: SurfaceHit::point is those weights of
+  /// the face's corners on `surface`, SurfaceHit::distance the distance from the query to the moved copy.
+  SurfaceLocator(const Surface& surface, const Eigen::MatrixXd& search_V);
   ~SurfaceLocator();
   SurfaceLocator(const SurfaceLocator&) = delete;
   SurfaceLocator& operator=(const SurfaceLocator&) = delete;

@@ -89,6 +89,7 @@ TEST_F(Cli, UnknownOptionValues) {
   expect_rejected("cube torus", "cube");
   expect_rejected("sphere:radius=2 torus", "radius");
   expect_rejected("sphere torus --method teleport", "teleport");
+  expect_rejected("sphere torus --source-projection nearest", "nearest");
   expect_rejected("sphere torus --seams sideways", "sideways");
   expect_rejected("sphere torus --zero-snap 0.9", "0.9");
   expect_rejected("sphere torus --target-mesh " + (dir_ / "absent.obj").string(), "absent.obj");

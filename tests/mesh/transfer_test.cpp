@@ -379,6 +379,44 @@ TEST(TransferTest, RejectsNonFiniteQuery) {
   EXPECT_THROW(locator.closest_all(Q), InvalidInput);
 }
 
+TEST(TransferTest, MovedSearchReportsHitsOnTheSurfaceItself) {
+  // The search runs on a perturbed copy of a sphere (same faces) and reports on the sphere: a query at a moved vertex
+  // finds that vertex, a query at a point of a moved face finds the same face and weights.
+  const Surface sphere = to_surface(test_mesh::icosphere(2));
+  const Eigen::MatrixXd moved = perturbed(sphere, 7).V;
+  const SurfaceLocator locator(sphere, moved);
+  const SurfaceLocator plain(sphere);
+  const double scale = bounding_box(sphere.V).diagonal().norm();
+  for (Eigen::Index v = 0; v < sphere.V.rows(); ++v) {
+    const SurfaceHit hit = locator.closest(moved.row(v).transpose());
+    EXPECT_LE(hit.distance, 1e-12 * scale);
+    EXPECT_LE((hit.point - sphere.V.row(v).transpose()).norm(), 1e-12 * scale) << "vertex " << v;
+  }
+  int tested = 0, matched = 0;
+  for (Eigen::Index f = 0; f < sphere.F.rows(); f += 7) {
+    ++tested;
+    const Eigen::Vector3d w(0.2, 0.3, 0.5);
+    Eigen::Vector3d query = Eigen::Vector3d::Zero(), expected = Eigen::Vector3d::Zero();
+    for (int k = 0; k < 3; ++k) {
+      query += w(k) * moved.row(sphere.F(f, k)).transpose();
+      expected += w(k) * sphere.V.row(sphere.F(f, k)).transpose();
+    }
+    const SurfaceHit hit = locator.closest(query);
+    EXPECT_LE(hit.distance, 1e-12 * scale);
+    if (hit.face != int(f)) continue;  // the moved copy may fold over this point: another face can hold it too
+    ++matched;
+    EXPECT_LE((hit.barycentric - w).norm(), 1e-9) << "face " << f;
+    EXPECT_LE((hit.point - expected).norm(), 1e-12 * scale) << "face " << f;
+    // The plain locator, by contrast, answers with the closest point of the sphere itself.
+    EXPECT_GT((plain.closest(query).point - expected).norm(), 1e-6 * scale) << "face " << f;
+  }
+  EXPECT_GE(matched, tested * 3 / 4);
+  EXPECT_THROW(SurfaceLocator(sphere, moved.topRows(3)), InvalidInput);
+  Eigen::MatrixXd broken = moved;
+  broken(0, 0) = std::numeric_limits<double>::quiet_NaN();
+  EXPECT_THROW(SurfaceLocator(sphere, broken), InvalidInput);
+}
+
 TEST(TransferTest, RejectsUnusableInput) {
   const Surface octa = to_surface(test_mesh::octahedron());
   const SurfaceLocator locator(octa);
