@@ -426,16 +426,22 @@ PipelineResult run_pipeline(const PipelineOptions& options) {
   if (!closest_point && options.source_projection == "inverse") {
     const auto projection_start = Clock::now();
     const SliceMesh extracted_a = source_boundary(mesh, Eigen::MatrixXd());
-    Surface on_a;
-    on_a.V = extracted_a.V;
-    on_a.F = extracted_a.F.cast<int>();
-    on_a.name = "the extracted source";
-    const std::vector<SurfaceHit> offsets = SurfaceLocator(on_a).closest_all(A.V);
-    double largest = 0.0;
-    for (const SurfaceHit& hit : offsets) largest = std::max(largest, hit.distance);
-    projector = std::make_unique<SurfaceLocator>(A, points_of(offsets));
-    projection_report["largest_offset_voxels"] = largest / morph.field.voxel_size;
-    projection_report["seconds"] = seconds_since(projection_start);
+    if (extracted_a.F.rows() == 0) {
+      // A vanished on the lattice (smaller than a voxel): nothing to invert, every label is a fallback anyway.
+      projection_report = {
+          {"method", "closest"}, {"requested", "inverse"}, {"reason", "the extracted source is empty"}};
+    } else {
+      Surface on_a;
+      on_a.V = extracted_a.V;
+      on_a.F = extracted_a.F.cast<int>();
+      on_a.name = "the extracted source";
+      const std::vector<SurfaceHit> offsets = SurfaceLocator(on_a).closest_all(A.V);
+      double largest = 0.0;
+      for (const SurfaceHit& hit : offsets) largest = std::max(largest, hit.distance);
+      projector = std::make_unique<SurfaceLocator>(A, points_of(offsets));
+      projection_report["largest_offset_voxels"] = largest / morph.field.voxel_size;
+      projection_report["seconds"] = seconds_since(projection_start);
+    }
   }
   const SurfaceLocator& to_a = projector ? *projector : locator;
   auto onto_a = [&](TraceResult traced) {

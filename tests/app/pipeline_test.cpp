@@ -119,6 +119,20 @@ std::string write_subdivided_octahedron(const std::filesystem::path& path) {
   return path.string();
 }
 
+TEST(Pipeline, SourceSmallerThanAVoxelFallsBackToTheClosestPointProjection) {
+  // A sphere a hundredth of a voxel across leaves no extracted A to invert; the run still labels B (every trace
+  // a fallback) and says which projection it used.
+  PipelineOptions o = small_options("sphere:size=0.01,center=0/0/0", "torus", "cg-amg");
+  o.morph.voxels = 12;
+  o.extract.time_steps = 4;
+  const PipelineResult r = run_pipeline(o);
+  EXPECT_GT(r.target.V.rows(), 0);
+  const nlohmann::json report = nlohmann::json::parse(r.report_json);
+  EXPECT_EQ(report["projection"]["method"], "closest");
+  EXPECT_EQ(report["projection"]["requested"], "inverse");
+  EXPECT_TRUE(r.target_labels.allFinite());
+}
+
 TEST(Pipeline, ShapeMorphedToItselfMapsItsOwnVerticesToThemselves) {
   // --target-mesh enters B through the closest points of the user's vertices on the extracted B; the inverse source
   // projection undoes that on A, so the identity morph of a mesh onto itself gives every vertex its own position.
