@@ -761,14 +761,6 @@ void append_number(std::string& out, long long x) {
   out.append(buffer, result.ptr);
 }
 
-void write_bytes(const std::string& path, const std::string& bytes) {
-  std::FILE* file = std::fopen(path.c_str(), "wb");
-  if (file == nullptr) throw IoError(path + ": cannot open file for writing (" + std::strerror(errno) + ")");
-  const bool written = std::fwrite(bytes.data(), 1, bytes.size(), file) == bytes.size();
-  const bool closed = std::fclose(file) == 0;
-  if (!written || !closed) throw IoError(path + ": cannot write file (" + std::strerror(errno) + ")");
-}
-
 // A file written through a buffer that is handed to the file whenever it holds a megabyte: the mesh writers format
 // into `text` and call `flush_if_full` after each line or record. Writing the whole file from one string held it
 // all in memory at once, and its reallocations twice: at small sizes the output writing was the run's peak of memory
@@ -900,9 +892,10 @@ void write_obj(const std::string& path, const Eigen::MatrixXd& V, const TriIndic
 }
 
 void write_mtl(const std::string& path, const std::string& texture_name) {
-  std::string out = "# morphmap\nnewmtl morphmap\nKa 1 1 1\nKd 1 1 1\nKs 0 0 0\nillum 1\n";
-  if (!texture_name.empty()) out += "map_Kd " + texture_name + "\n";
-  write_bytes(path, out);
+  ChunkedFile file(path);
+  file.text = "# morphmap\nnewmtl morphmap\nKa 1 1 1\nKd 1 1 1\nKs 0 0 0\nillum 1\n";
+  if (!texture_name.empty()) file.text += "map_Kd " + texture_name + "\n";
+  file.finish();
 }
 
 void write_ply(const std::string& path, const Eigen::MatrixXd& V, const TriIndices& F, const Eigen::MatrixXd& UV) {
