@@ -314,6 +314,33 @@ bool job_complete(const fs::path& dir, const BatchJob& job) {
   }
 }
 
+// Removes the staging folders and temporary files of killed processes (io/output_dir.cpp's names) from a job
+// folder; the lock makes sure no live process owns them. Also for complete jobs: `map` renames report.json into
+// place before it removes its (then empty) staging folder, so a batch killed between the two leaves one behind.
+void remove_leftovers(const fs::path& dir) {
+  std::error_code ec;
+  for (fs::directory_iterator it(dir, ec), end; !ec && it != end; it.increment(ec)) {
+    const std::string name = it->path().filename().string();
+    if (name.rfind(".staging-", 0) == 0 || (name[0] == '.' && name.find(".tmp-") != std::string::npos)) {
+      std::error_code ignored;
+      fs::remove_all(it->path(), ignored);
+    }
+  }
+}
+
+// The temporary files of summaries that a killed batch was writing (write_text_atomically's names for
+// summary.csv and summary.md). Only those: the batch's folder may hold the user's own files.
+void remove_summary_leftovers(const fs::path& dir) {
+  std::error_code ec;
+  for (fs::directory_iterator it(dir, ec), end; !ec && it != end; it.increment(ec)) {
+    const std::string name = it->path().filename().string();
+    if ((name.rfind(".summary.csv.tmp-", 0) == 0 || name.rfind(".summary.md.tmp-", 0) == 0) && it->is_regular_file()) {
+      std::error_code ignored;
+      fs::remove(it->path(), ignored);
+    }
+  }
+}
+
 // Before (re)running a job: no report.json that could be taken for this run's, no leftovers of killed runs.
 void prepare_job_folder(const fs::path& dir, const BatchJob& job) {
   std::error_code ec;
@@ -321,15 +348,7 @@ void prepare_job_folder(const fs::path& dir, const BatchJob& job) {
   if (ec || !fs::is_directory(dir)) throw IoError(dir.string() + ": cannot create job folder");
   fs::remove(dir / "report.json", ec);
   if (ec) throw IoError((dir / "report.json").string() + ": cannot remove stale report (" + ec.message() + ")");
-  for (fs::directory_iterator it(dir, ec), end; !ec && it != end; it.increment(ec)) {
-    const std::string name = it->path().filename().string();
-    // Staging folders and temporary files of killed processes (io/output_dir.cpp's names); the lock makes sure
-    // no live process owns them.
-    if (name.rfind(".staging-", 0) == 0 || (name[0] == '.' && name.find(".tmp-") != std::string::npos)) {
-      std::error_code ignored;
-      fs::remove_all(it->path(), ignored);
-    }
-  }
+  remove_leftovers(dir);
   write_text_atomically((dir / "job.json").string(), job_record(job));
 }
 
@@ -539,6 +558,7 @@ BatchResult run_batch(const BatchOptions& options) {
   if (ec || !fs::is_directory(options.output_dir))
     throw IoError(options.output_dir + ": cannot create output directory" + (ec ? " (" + ec.message() + ")" : ""));
   const FolderLock lock(options.output_dir);
+  remove_summary_leftovers(options.output_dir);  // a batch killed while it wrote a summary (SIGKILL)
   const StopSignals signals;
   const StatusLine status(options.progress);
   const auto batch_start = Clock::now();
@@ -559,6 +579,7 @@ BatchResult run_batch(const BatchOptions& options) {
     if (job_complete(dir, job)) {
       try {
         row = summary_row(job.name, read_file((dir / "report.json").string()));
+        remove_leftovers(dir);
         ++result.succeeded;
         ++result.skipped;
         status.finish(label + ": complete, skipped");

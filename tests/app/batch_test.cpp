@@ -309,6 +309,32 @@ TEST_F(Batch, RerunSkipsCompleteJobsAndRedoesChangedOnes) {
   EXPECT_EQ(read_csv(out / "summary.csv").at(2).at(3), "3");
 }
 
+// A batch SIGKILLed at the wrong moment leaves hidden temporaries that no job rerun owns: a summary it was writing
+// (write_text_atomically's temporary in the batch folder) or, in a job that completed, the empty staging folder
+// `map` removes just after renaming report.json into place. A rerun removes them, skipped job or not, and leaves
+// the user's own files alone.
+TEST_F(Batch, RerunRemovesLeftoversOfAKilledBatchAndKeepsOtherFiles) {
+  const fs::path out = dir_ / "out";
+  const fs::path m = write("m.json", std::string("{\"jobs\": [{\"name\": \"a\", ") + kTiny + "}]}");
+  ASSERT_EQ(run_command("batch " + m.string() + " -o " + out.string()).status, 0);
+  const auto a_time = fs::last_write_time(out / "a" / "report.json");
+  const std::vector<fs::path> leftovers = {out / ".summary.csv.tmp-4242-1", out / ".summary.md.tmp-4242-2",
+                                           out / "a" / ".staging-4242-3", out / "a" / ".labels.txt.tmp-4242-4"};
+  for (const fs::path& p : leftovers) {
+    if (p.filename().string().rfind(".staging-", 0) == 0)
+      fs::create_directory(p);
+    else
+      std::ofstream(p) << "partial";
+  }
+  const std::vector<fs::path> kept = {out / ".notes.tmp-mine", out / "notes.txt"};
+  for (const fs::path& p : kept) std::ofstream(p) << "mine";
+  const CommandRun rerun = run_command("batch " + m.string() + " -o " + out.string());
+  ASSERT_EQ(rerun.status, 0) << rerun.output;
+  EXPECT_EQ(fs::last_write_time(out / "a" / "report.json"), a_time) << "the complete job ran again";
+  for (const fs::path& p : leftovers) EXPECT_FALSE(fs::exists(p)) << p;
+  for (const fs::path& p : kept) EXPECT_TRUE(fs::exists(p)) << p;
+}
+
 // Kills a batch while its second job runs, then reruns it: the rerun skips the first job, finishes the others, and
 // its summary matches an uninterrupted batch's.
 class BatchKilled : public Batch, public ::testing::WithParamInterface<int> {};
