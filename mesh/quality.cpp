@@ -166,25 +166,24 @@ struct ChunkEdges {
   double abs_sum = 0.0;
 };
 
-/// measure_quality over a source of per-tet figures: measure(t, floor, cosines) returns the tet's 3-volume (0 when it
-/// is rounding noise) and, when that exceeds floor, writes the cosines of its six dihedrals (kEdge order); edge(t, e)
-/// is its stiffness vol * grad(lambda_i) . grad(lambda_j) on edge e, read only for tets measured above the final floor.
-template <class Measure, class Edge>
-QualityResult measure_with(const TetMesh4& mesh, const QualityOptions& options, const SharedStars& stars,
-                           Clock::time_point start, Measure&& measure, Edge&& edge) {
+double seconds_since(Clock::time_point start) { return std::chrono::duration<double>(Clock::now() - start).count(); }
+
+/// Every figure of measure_quality but the edge ones, over a source of per-tet figures: measure(t, floor, cosines)
+/// returns the tet's 3-volume (0 when it is rounding noise) and, when that exceeds floor, writes the cosines of its six
+/// dihedrals (kEdge order). `usable` (#T) receives which tets are not degenerate, the ones the edge figures sum over.
+template <class Measure>
+QualityResult angle_figures(const TetMesh4& mesh, const QualityOptions& options, Measure&& measure,
+                            std::vector<std::uint8_t>& usable) {
   const Points4& V = mesh.V;
   const TetIndices& T = mesh.T;
   const Eigen::Index tets = T.rows();
-  const Eigen::Index n = V.rows();
   const int bins = options.histogram_bins;
 
   QualityResult result;
   result.tets = tets;
   result.dihedral_histogram.assign(std::size_t(bins), 0);
-  if (tets == 0) {
-    result.seconds = std::chrono::duration<double>(Clock::now() - start).count();
-    return result;
-  }
+  usable.assign(to_size(tets), 0);
+  if (tets == 0) return result;
 
   // One pass over the tets: volume, angles and histogram of every tet whose volume is not rounding noise. Degenerate
   // also means 3-volume <= kDegenerateVolumeRatio * the mean, which is known only after the pass: the chunks holding
@@ -255,8 +254,12 @@ QualityResult measure_with(const TetMesh4& mesh, const QualityOptions& options, 
   for (Eigen::Index chunk = 0; chunk < tet_chunks; ++chunk)
     if (!(volume_stats[to_size(chunk)].min_positive_volume > degenerate_volume))
       measure_chunk(chunk, degenerate_volume);
-  // Strict: in an all-flat mesh (bound 0) every tet is degenerate, so nothing below divides by a zero volume.
-  auto usable = [&](Eigen::Index t) { return volume[to_size(t)] > degenerate_volume; };
+  // Strict: in an all-flat mesh (bound 0) every tet is degenerate, so nothing divides by a zero volume.
+  tbb::parallel_for(tbb::blocked_range<Eigen::Index>(0, tets, kChunkTets),
+                    [&](const tbb::blocked_range<Eigen::Index>& r) {
+                      for (Eigen::Index t = r.begin(); t < r.end(); ++t)
+                        usable[to_size(t)] = volume[to_size(t)] > degenerate_volume;
+                    });
 
   // Chunk order and strict comparisons: the first extreme in tet order wins, for any thread count.
   std::int64_t measured_tets = 0;
@@ -285,12 +288,28 @@ QualityResult measure_with(const TetMesh4& mesh, const QualityOptions& options, 
     result.max_dihedral_degrees = dihedral_degrees(V, T, extremes.largest_tet, extremes.largest_edge);
     result.obtuse_dihedral_fraction = double(result.obtuse_dihedrals) / (6.0 * double(measured_tets));
   }
+  return result;
+}
 
-  // Assemble K_ij per unique edge (a, b), a < b, at row a, as cotangent_stiffness does: each row walks its
-  // vertex's usable tets in tet order (its star, build_vertex_tets), so every sum has one order whatever the thread
-  // count. The sums of a block of rows are kept (in row order) until the tolerance, which needs all of them, is known.
-  const SharedStars shared = stars_or_build(stars, T, n);
-  const VertexTets& adj = *shared;
+/// The edge figures of `result` (edges, negative_cotangent_*): K_ij summed per unique edge (a, b), a < b, at row a,
+/// as cotangent_stiffness does: each row walks its vertex's usable tets in tet order (its star, build_vertex_tets),
+/// so every sum has one order whatever the thread count; edge(t, e) is tet t's stiffness on its edge e. With `rows`,
+/// a vertex that has a row there takes its sums to greater unknowns from it instead of walking its star: the
+/// assembly walked the same star in the same order (and (i, j) and (j, i) add the same doubles in the same order,
+/// since both stars list the edge's tets in tet order), so those are the same sums, bitwise, whichever end summed
+/// them; the vertices without a row (fixed or floating, a few percent of them) walk their stars for every edge to
+/// an unknown and to a greater vertex without a row. The sums walked are kept (in row order) until the tolerance,
+/// which needs all of them, is known; the rows' are read twice instead.
+template <class Edge>
+void edge_figures(QualityResult& result, const TetIndices& T, Eigen::Index n, const VertexTets& adj,
+                  const std::vector<std::uint8_t>& usable, Edge&& edge, const AssembledRows* rows) {
+  const std::vector<int>* row_of = rows != nullptr ? rows->row_of : nullptr;
+  auto row = [&](Eigen::Index v) { return row_of != nullptr ? (*row_of)[to_size(v)] : -1; };
+  // Entries of row u to columns above u (ascending columns, so a tail of the row): the edges to greater unknowns.
+  auto upper_begin = [&](int u) {
+    const int* begin = rows->inner + rows->outer[u];
+    return int(std::upper_bound(begin, rows->inner + rows->outer[u + 1], u) - rows->inner);
+  };
   const Eigen::Index vertex_chunks = (n + kChunkVertices - 1) / kChunkVertices;
   std::vector<std::vector<double>> sums(to_size(vertex_chunks));
   std::vector<ChunkEdges> edge_stats(to_size(vertex_chunks));
@@ -305,14 +324,23 @@ QualityResult measure_with(const TetMesh4& mesh, const QualityOptions& options, 
     std::vector<double>& out = sums[to_size(chunk)];
     const Eigen::Index end = std::min(n, (chunk + 1) * kChunkVertices);
     for (Eigen::Index a = chunk * kChunkVertices; a < end; ++a) {
+      const int u = row(a);
+      if (u >= 0) {
+        for (int k = upper_begin(u); k < rows->outer[u + 1]; ++k) {
+          s.abs_sum += std::abs(rows->value[k]);
+          ++s.edges;
+        }
+        continue;
+      }
       w.row.clear();
       for (std::int64_t q = adj.first(int(a)); q < adj.last(int(a)); ++q) {
         const int t = adj.tet(q);
-        if (!usable(t)) continue;
+        if (!usable[std::size_t(t)]) continue;
         for (int e = 0; e < 6; ++e) {
           const int vi = T(t, kEdge[e][0]), vj = T(t, kEdge[e][1]);
           const int b = vi == a ? vj : vj == a ? vi : -1;
-          if (b <= a) continue;  // not an edge of a, or one that row b's smaller end sums
+          // Not an edge of a, or one that another row sums: b's (the smaller end's), or the assembly's.
+          if (b < 0 || (b < a && row(b) < 0)) continue;
           const double value = edge(t, e);
           int& slot = w.slot[std::size_t(b)];
           if (slot < 0) {
@@ -341,14 +369,34 @@ QualityResult measure_with(const TetMesh4& mesh, const QualityOptions& options, 
     result.negative_cotangent_edges = tbb::parallel_reduce(
         tbb::blocked_range<std::size_t>(0, sums.size()), std::int64_t(0),
         [&](const tbb::blocked_range<std::size_t>& r, std::int64_t count) {
-          for (std::size_t c = r.begin(); c < r.end(); ++c)
+          for (std::size_t c = r.begin(); c < r.end(); ++c) {
             for (double v : sums[c]) count += v > tolerance ? 1 : 0;
+            if (row_of == nullptr) continue;
+            const Eigen::Index end = std::min(n, Eigen::Index(c + 1) * kChunkVertices);
+            for (Eigen::Index a = Eigen::Index(c) * kChunkVertices; a < end; ++a) {
+              const int u = row(a);
+              if (u < 0) continue;
+              for (int k = upper_begin(u); k < rows->outer[u + 1]; ++k) count += rows->value[k] > tolerance ? 1 : 0;
+            }
+          }
           return count;
         },
         [](std::int64_t x, std::int64_t y) { return x + y; });  // integer sum: exact in any order
     result.negative_cotangent_fraction = double(result.negative_cotangent_edges) / double(result.edges);
   }
-  result.seconds = std::chrono::duration<double>(Clock::now() - start).count();
+}
+
+/// measure_quality over a source of per-tet figures (angle_figures' measure, edge_figures' edge).
+template <class Measure, class Edge>
+QualityResult measure_with(const TetMesh4& mesh, const QualityOptions& options, const SharedStars& stars,
+                           Clock::time_point start, Measure&& measure, Edge&& edge) {
+  std::vector<std::uint8_t> usable;
+  QualityResult result = angle_figures(mesh, options, measure, usable);
+  if (mesh.T.rows() > 0) {
+    const SharedStars shared = stars_or_build(stars, mesh.T, mesh.V.rows());
+    edge_figures(result, mesh.T, mesh.V.rows(), *shared, usable, edge, nullptr);
+  }
+  result.seconds = seconds_since(start);
   return result;
 }
 
@@ -381,20 +429,25 @@ QualityResult measure_quality(const TetMesh4& mesh, const QualityOptions& option
   return measure_with(mesh, options, stars, start, measure, edge);
 }
 
-QualityResult quality_from_stiffness(const TetMesh4& mesh, const PackedStiffness& stiffness,
-                                     const Eigen::VectorXd& volume, const QualityOptions& options,
-                                     const SharedStars& stars) {
-  const auto start = Clock::now();
-  check_input(mesh, options);
-  if (stiffness.rows() != mesh.T.rows() || volume.size() != mesh.T.rows()) {
+namespace {
+
+void check_stiffness(const TetMesh4& mesh, const PackedStiffness& stiffness, const Eigen::VectorXd* volume,
+                     const std::vector<std::uint8_t>* usable, const char* who) {
+  const Eigen::Index tets = mesh.T.rows();
+  if (stiffness.rows() != tets || (volume != nullptr && volume->size() != tets) ||
+      (usable != nullptr && Eigen::Index(usable->size()) != tets)) {
     std::ostringstream msg;
-    msg << "quality_from_stiffness: " << stiffness.rows() << " stiffness rows and " << volume.size() << " volumes for "
-        << mesh.T.rows() << " tets";
+    msg << who << ": " << stiffness.rows() << " stiffness rows and "
+        << (volume != nullptr ? volume->size() : Eigen::Index(usable->size()))
+        << (volume != nullptr ? " volumes" : " usable flags") << " for " << tets << " tets";
     throw InvalidInput(msg.str());
   }
-  // The gradients' dot products are the stiffness over the volume, which cancels in the cosine:
-  // cos(dihedral at e) = -g_k . g_l / (|g_k| |g_l|) = -K_kl / sqrt(K_kk K_ll) for the opposite edge (k, l).
-  auto measure = [&](Eigen::Index t, double floor, double* cosines) {
+}
+
+/// The cosines from the stiffness: the gradients' dot products are the stiffness over the volume, which cancels:
+/// cos(dihedral at e) = -g_k . g_l / (|g_k| |g_l|) = -K_kl / sqrt(K_kk K_ll) for the opposite edge (k, l).
+auto stiffness_measure(const PackedStiffness& stiffness, const Eigen::VectorXd& volume) {
+  return [&stiffness, &volume](Eigen::Index t, double floor, double* cosines) {
     const double v = volume(t);
     if (!(v > floor)) return v;
     double K[4][4];
@@ -407,8 +460,51 @@ QualityResult quality_from_stiffness(const TetMesh4& mesh, const PackedStiffness
     }
     return v;
   };
-  auto edge = [&](Eigen::Index t, int e) { return stiffness_entry(stiffness.row(t).data(), kEdge[e][0], kEdge[e][1]); };
-  return measure_with(mesh, options, stars, start, measure, edge);
+}
+
+auto stiffness_edge(const PackedStiffness& stiffness) {
+  return [&stiffness](Eigen::Index t, int e) {
+    return stiffness_entry(stiffness.row(t).data(), kEdge[e][0], kEdge[e][1]);
+  };
+}
+
+}  // namespace
+
+QualityResult quality_from_stiffness(const TetMesh4& mesh, const PackedStiffness& stiffness,
+                                     const Eigen::VectorXd& volume, const QualityOptions& options,
+                                     const SharedStars& stars) {
+  const auto start = Clock::now();
+  check_input(mesh, options);
+  check_stiffness(mesh, stiffness, &volume, nullptr, "quality_from_stiffness");
+  return measure_with(mesh, options, stars, start, stiffness_measure(stiffness, volume), stiffness_edge(stiffness));
+}
+
+QualityResult quality_angles_from_stiffness(const TetMesh4& mesh, const PackedStiffness& stiffness,
+                                            const Eigen::VectorXd& volume, std::vector<std::uint8_t>& usable,
+                                            const QualityOptions& options) {
+  const auto start = Clock::now();
+  check_input(mesh, options);
+  check_stiffness(mesh, stiffness, &volume, nullptr, "quality_angles_from_stiffness");
+  QualityResult result = angle_figures(mesh, options, stiffness_measure(stiffness, volume), usable);
+  result.seconds = seconds_since(start);
+  return result;
+}
+
+void add_edge_figures(QualityResult& result, const TetMesh4& mesh, const PackedStiffness& stiffness,
+                      const std::vector<std::uint8_t>& usable, const SharedStars& stars, const AssembledRows* rows) {
+  const auto start = Clock::now();
+  check_stiffness(mesh, stiffness, nullptr, &usable, "add_edge_figures");
+  if (rows != nullptr && (rows->row_of == nullptr || Eigen::Index(rows->row_of->size()) != mesh.V.rows())) {
+    throw InvalidInput("add_edge_figures: the assembled rows need one row index per vertex");
+  }
+  result.edges = 0;
+  result.negative_cotangent_edges = 0;
+  result.negative_cotangent_fraction = 0.0;
+  if (mesh.T.rows() > 0) {
+    const SharedStars shared = stars_or_build(stars, mesh.T, mesh.V.rows());
+    edge_figures(result, mesh.T, mesh.V.rows(), *shared, usable, stiffness_edge(stiffness), rows);
+  }
+  result.seconds += seconds_since(start);
 }
 
 }  // namespace morphmap

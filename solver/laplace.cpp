@@ -253,12 +253,10 @@ DirichletSystem dirichlet_system(const TetMesh4& mesh, const SharedStars& stars,
   local_stiffness(V, T, L, vol);
   system.degenerate_tets = (vol.array() <= 0.0).count();
   const SharedStars shared_stars = stars_or_build(stars, T, n);  // built once for the quality pass and the rows
-  // Timed apart from the assembly: it is the quality stage's work, done here while the stiffness exists.
-  double quality_seconds = 0.0;
-  if (quality != nullptr) {
-    *quality = quality_from_stiffness(mesh, L, vol, {}, shared_stars);
-    quality_seconds = quality->seconds;
-  }
+  // Timed apart from the assembly: it is the quality stage's work, done here while the stiffness exists, its edge
+  // figures after the assembly, from its rows.
+  std::vector<std::uint8_t> usable;
+  if (quality != nullptr) *quality = quality_angles_from_stiffness(mesh, L, vol, usable);
 
   // The assembly reads only which tets carry stiffness: the volumes (8 bytes a tet) and, below, the component
   // tables (24 bytes a vertex) are released before it allocates the matrix, at what is the run's peak of memory
@@ -316,7 +314,13 @@ DirichletSystem dirichlet_system(const TetMesh4& mesh, const SharedStars& stars,
     if (uj >= 0) system.x0(uj) = mesh.time_of(j);
   }
   assemble_rows(T, *shared_stars, L, has_stiffness, system.unknown, unknowns, &system.s, system.A, &system.b);
-  system.assemble_seconds = seconds_since(assemble_start) - quality_seconds;
+  if (quality != nullptr) {
+    // The rows hold the quality stage's sums only where both skip the same tets (quality's mean-volume test can
+    // skip more than tet_frame's shape test; on the Table II morphs it does not).
+    const AssembledRows rows{&system.unknown, system.A.outerIndexPtr(), system.A.innerIndexPtr(), system.A.valuePtr()};
+    add_edge_figures(*quality, mesh, L, usable, shared_stars, usable == has_stiffness ? &rows : nullptr);
+  }
+  system.assemble_seconds = seconds_since(assemble_start) - (quality != nullptr ? quality->seconds : 0.0);
   return system;
 }
 

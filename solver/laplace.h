@@ -43,7 +43,8 @@ struct LaplaceOptions {
   bool warm_start = true;  ///< iterative backends (cg, cg-ic, cg-amg, gauss-seidel, auto) start from s = t instead of 0
   /// Also measure the mesh quality (LaplaceResult::quality) from the local stiffness, which the assembly computes
   /// anyway (quality_from_stiffness): on cow -> horse 0.13 s instead of the 0.19 s of measure_quality's own pass over
-  /// the tets' geometry (medians of 5 interleaved runs); most of what is left is the per-edge sums.
+  /// the tets' geometry (medians of 5 interleaved runs), and 0.07-0.08 s against 0.11-0.14 s since its edge figures
+  /// read the assembled rows (add_edge_figures; 3 interleaved runs, identical figures).
   bool measure_quality = false;
   /// Deflate the CG backends' solve by the space-time cells of this many voxels (space_time_cells); 0 = off.
   /// See README "Solvers" for the measurement that chose it.
@@ -66,8 +67,9 @@ struct DirichletSystem {
 
 /// Assembles the system solve_harmonic solves (it calls this), for benchmarks and external solvers. `stars`: the
 /// mesh's vertex stars when the caller has them (built here otherwise). `quality`, when given, receives
-/// quality_from_stiffness of the local stiffness (its seconds are not in assemble_seconds). Throws InvalidInput for
-/// inconsistent mesh arrays.
+/// quality_from_stiffness's figures of the local stiffness, its edge figures summed from the assembled rows
+/// (quality_angles_from_stiffness, then add_edge_figures; its seconds are not in assemble_seconds). Throws InvalidInput
+/// for inconsistent mesh arrays.
 DirichletSystem dirichlet_system(const TetMesh4& mesh, const SharedStars& stars = nullptr,
                                  QualityResult* quality = nullptr);
 

@@ -348,5 +348,28 @@ TEST(QualityExtracted, FromStiffnessAgreesWithMeasureQuality) {
   EXPECT_THROW(quality_from_stiffness(mesh, short_stiffness, Eigen::VectorXd::Ones(mesh.tet_count())), InvalidInput);
 }
 
+// The two parts the Laplace stage runs around its assembly: the first leaves the edge figures to the second, which
+// reads rows only when each vertex has a row entry, and both reject arrays of the wrong size.
+TEST(QualityExtracted, AngleAndEdgePartsCheckTheirInputs) {
+  const TetMesh4 mesh = extracted_mesh();
+  const PackedStiffness stiffness = PackedStiffness::Zero(mesh.tet_count(), 6);
+  const Eigen::VectorXd volume = Eigen::VectorXd::Zero(mesh.tet_count());  // every tet degenerate: nothing to sum
+  std::vector<std::uint8_t> usable;
+  QualityResult r = quality_angles_from_stiffness(mesh, stiffness, volume, usable);
+  ASSERT_EQ(Eigen::Index(usable.size()), mesh.tet_count());
+  EXPECT_EQ(std::count(usable.begin(), usable.end(), 1), 0);
+  EXPECT_EQ(r.degenerate_tets, mesh.tet_count());
+  EXPECT_EQ(r.edges, 0);
+  add_edge_figures(r, mesh, stiffness, usable, nullptr);
+  EXPECT_EQ(r.edges, 0);
+
+  const std::vector<std::uint8_t> short_usable(usable.size() - 1, 1);
+  EXPECT_THROW(add_edge_figures(r, mesh, stiffness, short_usable, nullptr), InvalidInput);
+  const std::vector<int> short_rows(std::size_t(mesh.vertex_count() - 1), -1);
+  const AssembledRows rows{&short_rows, nullptr, nullptr, nullptr};
+  EXPECT_THROW(add_edge_figures(r, mesh, stiffness, usable, nullptr, &rows), InvalidInput);
+  EXPECT_THROW(quality_angles_from_stiffness(mesh, stiffness, Eigen::VectorXd::Zero(3), usable), InvalidInput);
+}
+
 }  // namespace
 }  // namespace morphmap
