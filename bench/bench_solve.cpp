@@ -19,7 +19,8 @@
 // BM_SpMV/cow-horse/1.7Mx4 also multiplies four copies of it as one block-diagonal matrix (~190 MB) to measure
 // the memory-bound rate.
 //
-// BM_MapSolve: see below (the map's own systems, deflated).
+// BM_MapSolve: see below (the map's own systems, deflated). BM_Assemble: the Laplace stage's assembly of those
+// systems (dirichlet_system), alone and with the quality figures it reads off the local stiffness.
 //
 // Run: morphmap_bench --benchmark_filter='BM_Solve|BM_SpMV' --benchmark_repetitions=3 --benchmark_format=json
 // Systems are built once per size (a few seconds each, not timed) and cached for all backends and repetitions.
@@ -35,8 +36,10 @@
 #include <vector>
 
 #include "bench/bench_cases.h"
+#include "mesh/adjacency.h"
 #include "mesh/extract.h"
 #include "mesh/morph.h"
+#include "mesh/quality.h"
 #include "mesh/shapes.h"
 #include "solver/laplace.h"
 #include "solver/linear_solver.h"
@@ -178,6 +181,29 @@ void BM_MapSolve(benchmark::State& state, const Case& c, double cell_voxels) {
   state.counters["tets"] = static_cast<double>(system.tets);
 }
 
+// BM_Assemble/<morph>/<size>/<quality>: dirichlet_system on the map's own mesh (default c) with its vertex stars built
+// once outside the timing, as the pipeline shares them; quality = 1 also measures the mesh quality (the Laplace stage
+// with LaplaceOptions::measure_quality, the pipeline's default). Repetitions reuse memory the previous one freed, so
+// this is the assembly's compute, without the first-touch cost a fresh process pays (docs/performance_log.md).
+void BM_Assemble(benchmark::State& state, const Case& c, bool quality) {
+  const System& system = system_for(c, true);
+  if (!system.error.empty()) {
+    state.SkipWithError(system.error.c_str());
+    return;
+  }
+  const morphmap::SharedStars stars = morphmap::stars_or_build(nullptr, system.mesh.T, system.mesh.vertex_count());
+  morphmap::DirichletSystem s;
+  morphmap::QualityResult figures;
+  for (auto _ : state) {
+    s = morphmap::dirichlet_system(system.mesh, stars, quality ? &figures : nullptr);
+    benchmark::DoNotOptimize(s.A.valuePtr());
+  }
+  state.counters["assemble_seconds"] = s.assemble_seconds;
+  if (quality) state.counters["quality_seconds"] = figures.seconds;
+  state.counters["nnz"] = static_cast<double>(s.A.nonZeros());
+  state.counters["tets"] = static_cast<double>(system.tets);
+}
+
 /// `copies` copies of A on the diagonal: the same rows, more bytes than the last-level cache holds.
 SparseMatrixD block_diagonal(const SparseMatrixD& A, int copies) {
   const Eigen::Index n = A.rows();
@@ -246,6 +272,16 @@ const bool registered = [] {
       const std::string name = "BM_MapSolve/" + c.morph + "/" + c.size + "/cg-amg/" + std::to_string(int(cells));
       benchmark::RegisterBenchmark(name.c_str(), [c, cells](benchmark::State& state) { BM_MapSolve(state, c, cells); })
           ->Iterations(1)
+          ->UseRealTime()
+          ->Unit(benchmark::kMillisecond);
+    }
+  }
+  for (const Case& c : cases()) {
+    if (c.size.rfind("1.", 0) != 0) continue;
+    for (const bool quality : {false, true}) {
+      const std::string name = "BM_Assemble/" + c.morph + "/" + c.size + "/" + (quality ? "quality" : "plain");
+      benchmark::RegisterBenchmark(name.c_str(),
+                                   [c, quality](benchmark::State& state) { BM_Assemble(state, c, quality); })
           ->UseRealTime()
           ->Unit(benchmark::kMillisecond);
     }
