@@ -76,6 +76,23 @@ inline void unpack_stiffness(const double* packed, double K[4][4]) {
   K[0][0] = -(K[0][1] + K[0][2] + K[0][3]);
 }
 
+/// Row i of unpack_stiffness's K alone (`row`: 4 entries), computed as it computes them (the same bits): the assembly
+/// reads one row of each tet it meets, and rows 1-3 need one of the four row sums.
+inline void stiffness_row(const double* packed, int i, double row[4]) {
+  constexpr int kBlock[3][3] = {{0, 1, 2}, {1, 3, 4}, {2, 4, 5}};
+  if (i > 0) {
+    const int* b = kBlock[i - 1];
+    row[1] = packed[b[0]];
+    row[2] = packed[b[1]];
+    row[3] = packed[b[2]];
+    row[0] = -(row[1] + row[2] + row[3]);
+    return;
+  }
+  for (int j = 1; j < 4; ++j)
+    row[j] = -(packed[kBlock[j - 1][0]] + packed[kBlock[j - 1][1]] + packed[kBlock[j - 1][2]]);
+  row[0] = -(row[1] + row[2] + row[3]);
+}
+
 /// Entry (i, j), i != j, of unpack_stiffness's K alone, computed as it computes it (the same bits).
 inline double stiffness_entry(const double* packed, int i, int j) {
   // Row-major index of (a, b), 1 <= a, b <= 3, in the packed upper triangle.

@@ -123,12 +123,12 @@ void assemble_rows(const TetIndices& T, const VertexTets& stars, const PackedSti
       if (!has_stiffness[std::size_t(t)]) continue;  // degenerate
       int li = 0;
       while (T(t, li) != v) ++li;
-      double K[4][4];
-      if (values) unpack_stiffness(L.row(t).data(), K);
+      double K[4];
+      if (values) stiffness_row(L.row(t).data(), li, K);
       for (int lj = 0; lj < 4; ++lj) {
         const int col_vertex = T(t, lj);
         const int col = unknown[static_cast<std::size_t>(col_vertex)];
-        const double value = values ? K[li][lj] : 0.0;
+        const double value = values ? K[lj] : 0.0;
         if (col < 0) {
           if (values && s != nullptr) rhs -= value * (*s)(col_vertex);
           continue;

@@ -371,5 +371,33 @@ TEST(QualityExtracted, AngleAndEdgePartsCheckTheirInputs) {
   EXPECT_THROW(quality_angles_from_stiffness(mesh, stiffness, Eigen::VectorXd::Zero(3), usable), InvalidInput);
 }
 
+// The packed stiffness's unpacked forms, which the assembly and the quality stage read, agree bit for bit: a row
+// alone, an entry alone and the whole matrix (rows summing to zero up to rounding), on values of mixed sign and size.
+TEST(PackedStiffness, RowAndEntryAreBitwiseTheUnpackedMatrix) {
+  std::mt19937 rng(7);
+  std::uniform_real_distribution<double> value(-3.0, 3.0);
+  for (int trial = 0; trial < 200; ++trial) {
+    double packed[6];
+    for (double& p : packed) p = value(rng) * std::pow(10.0, int(rng() % 7) - 3);
+    double K[4][4];
+    unpack_stiffness(packed, K);
+    for (int i = 0; i < 4; ++i) {
+      double row[4];
+      stiffness_row(packed, i, row);
+      double sum = 0.0, scale = 0.0;
+      for (int j = 0; j < 4; ++j) {
+        EXPECT_EQ(row[j], K[i][j]) << "row " << i << " column " << j;
+        EXPECT_EQ(K[i][j], K[j][i]);
+        if (j != i) {
+          EXPECT_EQ(stiffness_entry(packed, i, j), K[i][j]);
+        }
+        sum += K[i][j];
+        scale += std::abs(K[i][j]);
+      }
+      EXPECT_LE(std::abs(sum), 1e-14 * scale);
+    }
+  }
+}
+
 }  // namespace
 }  // namespace morphmap
