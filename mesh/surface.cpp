@@ -2,6 +2,8 @@
 // need closed, manifold, consistently oriented triangle meshes with finite coordinates.
 #include "mesh/surface.h"
 
+#include <tbb/parallel_sort.h>
+
 #include <Eigen/Geometry>
 #include <algorithm>
 #include <cmath>
@@ -68,8 +70,10 @@ SurfaceCheck check_surface(const Eigen::MatrixXi& F, std::int64_t vertex_count) 
       uses.push_back({key, f, k});
     }
   }
-  // Sorting by (key, face, local) makes the corner unions below deterministic.
-  std::sort(uses.begin(), uses.end(), [](const EdgeUse& x, const EdgeUse& y) {
+  // Sorting by (key, face, local) makes the corner unions below deterministic; the order is total (no two uses share
+  // a face and a corner), so the parallel sort gives the same sequence as any other (cow -> horse's topology check
+  // of the extracted surfaces 15 -> 11 ms, medians of 5 interleaved runs; the loads within noise).
+  tbb::parallel_sort(uses.begin(), uses.end(), [](const EdgeUse& x, const EdgeUse& y) {
     return x.key != y.key ? x.key < y.key : (x.face != y.face ? x.face < y.face : x.local < y.local);
   });
 
