@@ -10,7 +10,6 @@
 
 #include <Eigen/Dense>
 #include <algorithm>
-#include <chrono>
 #include <cmath>
 #include <limits>
 #include <memory>
@@ -19,11 +18,10 @@
 
 #include "mesh/adjacency.h"
 #include "mesh/errors.h"
+#include "mesh/stopwatch.h"
 
 namespace morphmap {
 namespace {
-
-using Clock = std::chrono::steady_clock;
 
 constexpr double kPi = 3.14159265358979323846;
 
@@ -165,8 +163,6 @@ struct ChunkEdges {
   std::int64_t edges = 0;
   double abs_sum = 0.0;
 };
-
-double seconds_since(Clock::time_point start) { return std::chrono::duration<double>(Clock::now() - start).count(); }
 
 /// Every figure of measure_quality but the edge ones, over a source of per-tet figures: measure(t, floor, cosines)
 /// returns the tet's 3-volume (0 when it is rounding noise) and, when that exceeds floor, writes the cosines of its six

@@ -76,12 +76,14 @@ inline void unpack_stiffness(const double* packed, double K[4][4]) {
   K[0][0] = -(K[0][1] + K[0][2] + K[0][3]);
 }
 
+/// Index in a PackedStiffness row of K(a, b), 1 <= a, b <= 3 (kPackedIndex[a - 1][b - 1]).
+inline constexpr int kPackedIndex[3][3] = {{0, 1, 2}, {1, 3, 4}, {2, 4, 5}};
+
 /// Row i of unpack_stiffness's K alone (`row`: 4 entries), computed as it computes them (the same bits): the assembly
 /// reads one row of each tet it meets, and rows 1-3 need one of the four row sums.
 inline void stiffness_row(const double* packed, int i, double row[4]) {
-  constexpr int kBlock[3][3] = {{0, 1, 2}, {1, 3, 4}, {2, 4, 5}};
   if (i > 0) {
-    const int* b = kBlock[i - 1];
+    const int* b = kPackedIndex[i - 1];
     row[1] = packed[b[0]];
     row[2] = packed[b[1]];
     row[3] = packed[b[2]];
@@ -89,17 +91,15 @@ inline void stiffness_row(const double* packed, int i, double row[4]) {
     return;
   }
   for (int j = 1; j < 4; ++j)
-    row[j] = -(packed[kBlock[j - 1][0]] + packed[kBlock[j - 1][1]] + packed[kBlock[j - 1][2]]);
+    row[j] = -(packed[kPackedIndex[j - 1][0]] + packed[kPackedIndex[j - 1][1]] + packed[kPackedIndex[j - 1][2]]);
   row[0] = -(row[1] + row[2] + row[3]);
 }
 
 /// Entry (i, j), i != j, of unpack_stiffness's K alone, computed as it computes it (the same bits).
 inline double stiffness_entry(const double* packed, int i, int j) {
-  // Row-major index of (a, b), 1 <= a, b <= 3, in the packed upper triangle.
-  constexpr int kBlock[3][3] = {{0, 1, 2}, {1, 3, 4}, {2, 4, 5}};
   if (i > j) std::swap(i, j);
-  if (i > 0) return packed[kBlock[i - 1][j - 1]];
-  return -(packed[kBlock[j - 1][0]] + packed[kBlock[j - 1][1]] + packed[kBlock[j - 1][2]]);
+  if (i > 0) return packed[kPackedIndex[i - 1][j - 1]];
+  return -(packed[kPackedIndex[j - 1][0]] + packed[kPackedIndex[j - 1][1]] + packed[kPackedIndex[j - 1][2]]);
 }
 
 /// measure_quality's figures from the stiffness the Laplace stage computes anyway (solve_harmonic with

@@ -508,9 +508,12 @@ std::int64_t count_curves(const std::vector<std::array<int, 2>>& edges) {
 
 namespace {
 
-/// An undirected edge (lo < hi) as one 64-bit key, and its hash (splitmix64's finaliser: the identity hash of
-/// libstdc++ would put the keys of one vertex, which differ only in the low word, in neighbouring buckets).
-std::uint64_t edge_key(int lo, int hi) { return (std::uint64_t(std::uint32_t(lo)) << 32) | std::uint32_t(hi); }
+/// An undirected edge as one 64-bit key (its lower vertex in the high word), and its hash (splitmix64's finaliser:
+/// the identity hash of libstdc++ would put the keys of one vertex, which differ only in the low word, in
+/// neighbouring buckets).
+std::uint64_t edge_key(int a, int b) {
+  return (std::uint64_t(std::uint32_t(std::min(a, b))) << 32) | std::uint32_t(std::max(a, b));
+}
 struct EdgeKeyHash {
   std::size_t operator()(std::uint64_t x) const {
     x = (x ^ (x >> 30)) * 0xbf58476d1ce4e5b9ULL;
@@ -634,7 +637,7 @@ SeamResult split_seams(const SliceMesh& slice, const TetMesh4& mesh, const Eigen
     }
     // A cut, or a piece of an edge between consecutive crossings, crosses nothing by construction: testing it
     // again would only find its own end points' seams.
-    auto mark_clean = [&](int a, int b) { edge_splits.emplace(edge_key(std::min(a, b), std::max(a, b)), EdgeSplit{}); };
+    auto mark_clean = [&](int a, int b) { edge_splits.emplace(edge_key(a, b), EdgeSplit{}); };
     // Edges inside an input triangle (fan spokes and diagonals) are tested when first used: the label map is
     // affine over the triangle but the seams and closest-point jumps it pulls back from A are curves, which
     // can cross a spoke although they enter and leave through the crossings the spoke's fan was built from.
