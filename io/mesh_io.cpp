@@ -125,8 +125,17 @@ class LineCursor {
     return s;
   }
 
+  // std::from_chars first (correctly rounded like strtod, and a few times faster: half of horse.obj's 36 ms read
+  // was strtod and strtoll); strtod where it does not take the whole number ('+', hex, out of range), so every text
+  // reads as strtod reads it.
   bool number(double& value) {
     if (at_end()) return false;
+    const char* stop = token_end();
+    const auto [ptr, ec] = std::from_chars(p_, stop, value);
+    if (ec == std::errc() && ptr == stop) {
+      p_ = stop;
+      return true;
+    }
     char* end = nullptr;
     value = std::strtod(p_, &end);
     if (end == p_ || !is_delimiter(*end)) fail("bad number '" + word() + "'");
@@ -136,6 +145,12 @@ class LineCursor {
 
   bool integer(long long& value) {
     if (at_end()) return false;
+    const char* stop = token_end();
+    const auto [ptr, ec] = std::from_chars(p_, stop, value);
+    if (ec == std::errc() && ptr == stop) {
+      p_ = stop;
+      return true;
+    }
     char* end = nullptr;
     errno = 0;
     value = std::strtoll(p_, &end, 10);
@@ -146,6 +161,11 @@ class LineCursor {
 
  private:
   static bool is_delimiter(char c) { return c == '\0' || c == ' ' || c == '\t' || c == '#'; }
+  const char* token_end() const {
+    const char* end = p_;
+    while (!is_delimiter(*end)) ++end;
+    return end;
+  }
   void skip_blanks() {
     while (*p_ == ' ' || *p_ == '\t') ++p_;
   }
@@ -155,19 +175,23 @@ class LineCursor {
   const char* p_;
 };
 
-// Splits `data` into NUL-terminated lines in place; carriage returns become blanks.
+// Splits `data` into NUL-terminated lines in place; carriage returns become blanks. Searched with memchr, which scans
+// many bytes a step (a byte-by-byte loop was a tenth of reading horse.obj).
 std::vector<const char*> split_lines(std::string& data) {
   std::vector<const char*> lines;
-  std::size_t start = 0;
-  for (std::size_t i = 0; i < data.size(); ++i) {
-    if (data[i] == '\r') data[i] = ' ';
-    if (data[i] == '\n' || data[i] == '\0') {
-      data[i] = '\0';
-      lines.push_back(data.data() + start);
-      start = i + 1;
-    }
+  char* const d = data.data();
+  const std::size_t n = data.size();
+  for (std::size_t start = 0; start < n;) {
+    const void* newline = std::memchr(d + start, '\n', n - start);
+    std::size_t end = newline != nullptr ? std::size_t(static_cast<const char*>(newline) - d) : n;
+    const void* nul = std::memchr(d + start, '\0', end - start);  // a NUL ends a line too
+    if (nul != nullptr) end = std::size_t(static_cast<const char*>(nul) - d);
+    for (char* r = d + start; (r = static_cast<char*>(std::memchr(r, '\r', std::size_t(d + end - r)))) != nullptr;)
+      *r++ = ' ';
+    lines.push_back(d + start);
+    if (end < n) d[end] = '\0';  // past the last byte, data.c_str() ends with a NUL already
+    start = end + 1;
   }
-  if (start < data.size()) lines.push_back(data.data() + start);  // data.c_str() ends with a NUL
   return lines;
 }
 
@@ -176,23 +200,30 @@ std::vector<const char*> split_lines(std::string& data) {
 
 // Splits an OBJ face corner "v", "v/vt", "v//vn" or "v/vt/vn" into its vertex and texture indices (0 = absent).
 void parse_obj_corner(const LineCursor& cursor, const std::string& token, long long& v, long long& vt) {
-  auto parse_index = [&](const std::string& text) -> long long {
-    if (text.empty()) return 0;
-    const char* begin = text.c_str();
-    char* end = nullptr;
-    errno = 0;
-    const long long value = std::strtoll(begin, &end, 10);
-    if (end != begin + text.size() || errno == ERANGE) cursor.fail("bad face corner '" + token + "'");
+  // from_chars where it reads the whole index, else strtoll as before (it also takes '+5'), with its errors.
+  auto parse_index = [&](const char* begin, const char* end) -> long long {
+    if (begin == end) return 0;
+    long long value = 0;
+    const auto [ptr, ec] = std::from_chars(begin, end, value);
+    if (!(ec == std::errc() && ptr == end)) {
+      const std::string text(begin, end);
+      char* stop = nullptr;
+      errno = 0;
+      value = std::strtoll(text.c_str(), &stop, 10);
+      if (stop != text.c_str() + text.size() || errno == ERANGE) cursor.fail("bad face corner '" + token + "'");
+    }
     if (value == 0) cursor.fail("face corner '" + token + "' has index 0 (OBJ indices start at 1)");
     return value;
   };
+  const char* const text = token.c_str();
+  const char* const text_end = text + token.size();
   const std::size_t slash = token.find('/');
-  v = parse_index(token.substr(0, slash));
+  v = parse_index(text, slash == std::string::npos ? text_end : text + slash);
   if (v == 0) cursor.fail("face corner '" + token + "' has no vertex index");
   vt = 0;
   if (slash == std::string::npos) return;
   const std::size_t slash2 = token.find('/', slash + 1);
-  vt = parse_index(token.substr(slash + 1, slash2 == std::string::npos ? std::string::npos : slash2 - slash - 1));
+  vt = parse_index(text + slash + 1, slash2 == std::string::npos ? text_end : text + slash2);
 }
 
 // Loads the materials of every library (missing libraries are skipped: an OBJ without its MTL is still a mesh).

@@ -4,6 +4,7 @@
 #include <gtest/gtest.h>
 #include <unistd.h>
 
+#include <cmath>
 #include <cstring>
 #include <filesystem>
 #include <fstream>
@@ -246,6 +247,36 @@ TEST_F(MeshIoTest, MalformedTextIsInvalidInput) {
   EXPECT_NE(error_of<InvalidInput>(write("m2.ply", "solid\n")).find("not a PLY file"), std::string::npos);
   EXPECT_NE(error_of<InvalidInput>(write("m3.ply", "ply\nformat ascii 1.0\nelement vertex 1\n")).find("end_header"),
             std::string::npos);
+}
+
+// The text readers take numbers with std::from_chars and fall back to strtod / strtoll where from_chars stops early,
+// so every form strtod reads still reads, to the same double: a leading '+', hexadecimal floats, values from_chars
+// rounds out of range, indices with '+'. Carriage returns are blanks; a NUL byte ends its line.
+TEST_F(MeshIoTest, ObjNumbersReadAsStrtodReadsThem) {
+  const std::string text =
+      "v +1.5 0x1p-2 .25\r\n"
+      "v 1e-320 -0 3.\n"
+      "v 0.1 2.5e+1 -7\n"
+      "f +1 2/ 3\n";
+  const Surface s = read_surface(write("n.obj", text));
+  ASSERT_EQ(s.V.rows(), 3);
+  ASSERT_EQ(s.F.rows(), 1);
+  EXPECT_EQ(s.V(0, 0), 1.5);
+  EXPECT_EQ(s.V(0, 1), 0.25);
+  EXPECT_EQ(s.V(0, 2), 0.25);
+  EXPECT_EQ(s.V(1, 0), std::strtod("1e-320", nullptr));  // subnormal: strtod's ERANGE result is kept
+  EXPECT_TRUE(std::signbit(s.V(1, 1)));
+  EXPECT_EQ(s.V(1, 2), 3.0);
+  EXPECT_EQ(s.V(2, 0), std::strtod("0.1", nullptr));
+  EXPECT_EQ(s.V(2, 1), 25.0);
+  EXPECT_EQ(s.F.row(0), Eigen::RowVector3i(0, 1, 2));
+  EXPECT_NE(error_of<InvalidInput>(write("h.obj", "v 0 0 1e\n")).find("line 1: bad number '1e'"), std::string::npos);
+  EXPECT_NE(
+      error_of<InvalidInput>(write("i.obj", "v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3x\n")).find("bad face corner '3x'"),
+      std::string::npos);
+  const Surface cut = read_surface(write("z.obj", std::string("v 0 0 0\nv 1 0 0\nv 0 1 0 ") + '\0' + " junk\nf 1 2 3"));
+  EXPECT_EQ(cut.V.rows(), 3);
+  EXPECT_EQ(cut.F.rows(), 1);
 }
 
 TEST_F(MeshIoTest, TruncatedBinaryPlyIsInvalidInput) {
