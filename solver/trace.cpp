@@ -17,6 +17,7 @@
 #include <atomic>
 #include <chrono>
 #include <limits>
+#include <numeric>
 #include <string>
 
 #include "mesh/adjacency.h"
@@ -737,6 +738,39 @@ const TetMesh4& checked(const TetMesh4& mesh, const Eigen::VectorXd& s, const Ei
 
 }  // namespace
 
+namespace {
+
+// The start points in Morton (Z-curve) order of their first vertex's position on a 1024^3 grid over the mesh's
+// box, ties in start order: neighbouring traces cross the same tets, so a thread that traces them one after
+// another finds those tets' rows in its cache (BM_Trace/cow_horse 961-963 -> 942-944 ms, two alternating pairs).
+// Only the schedule changes: every trace is independent and stored at its own index.
+std::vector<std::size_t> spatial_order(const TetMesh4& mesh, const std::vector<MeshPoint>& starts) {
+  const std::size_t count = starts.size();
+  std::vector<std::size_t> order(count);
+  std::iota(order.begin(), order.end(), std::size_t(0));
+  if (count == 0 || mesh.vertex_count() == 0) return order;
+  const Eigen::Vector3d lo = mesh.V.leftCols<3>().colwise().minCoeff().transpose();
+  const Eigen::Vector3d size = mesh.V.leftCols<3>().colwise().maxCoeff().transpose() - lo;
+  std::vector<std::uint32_t> key(count, 0);
+  for (std::size_t i = 0; i < count; ++i) {
+    const int v = starts[i].ids[0];
+    if (v < 0 || v >= mesh.vertex_count()) continue;  // traced as invalid; anywhere in the order
+    std::uint32_t cell[3];
+    for (int a = 0; a < 3; ++a) {
+      const double u = size(a) > 0.0 ? (mesh.V(v, a) - lo(a)) / size(a) : 0.0;
+      cell[a] = std::uint32_t(std::clamp(u, 0.0, 1.0) * 1023.0);
+    }
+    std::uint32_t k = 0;
+    for (int bit = 9; bit >= 0; --bit)
+      for (int a = 0; a < 3; ++a) k = (k << 1) | ((cell[a] >> bit) & 1u);
+    key[i] = k;
+  }
+  std::stable_sort(order.begin(), order.end(), [&](std::size_t a, std::size_t b) { return key[a] < key[b]; });
+  return order;
+}
+
+}  // namespace
+
 CharacteristicTracer::CharacteristicTracer(const TetMesh4& mesh, const Eigen::VectorXd& s,
                                            const Eigen::MatrixXd& vertex_field, const TraceOptions& options,
                                            const SharedStars& stars) {
@@ -760,8 +794,10 @@ TraceResult CharacteristicTracer::trace(const std::vector<MeshPoint>& starts) co
   result.end_point.resize(count);
   result.status.resize(count);
   std::vector<Stats> stats(count);
+  const std::vector<std::size_t> order = spatial_order(mesh, starts);
   tbb::parallel_for(tbb::blocked_range<std::size_t>(0, count, 16), [&](const auto& r) {
-    for (std::size_t i = r.begin(); i != r.end(); ++i) {
+    for (std::size_t o = r.begin(); o != r.end(); ++o) {
+      const std::size_t i = order[o];
       MeshPoint& end = result.end_point[i];
       result.status[i] = tracer.trace(starts[i], end, stats[i]);
       Eigen::Vector3d x = Eigen::Vector3d::Zero();
