@@ -71,8 +71,8 @@ Weights rates(const Simplex& x, const Weights& w) {
 // Forced inline: out of line (once choose() and descend() shared the simplex enumeration) it cost cow -> horse's
 // trace 20% more time.
 template <int K>
-__attribute__((always_inline)) inline bool simplex_system(const TetMesh4& mesh, const Eigen::MatrixXd& field,
-                                                          const Eigen::MatrixXd& normals, Simplex& x) {
+__attribute__((always_inline)) inline bool simplex_system(const TetMesh4& mesh, const Points4& field,
+                                                          const Points4& normals, Simplex& x) {
   Eigen::Matrix<double, 4, K> E;
   const Eigen::Vector4d v0 = mesh.V.row(x.ids[0]).transpose();
   for (int j = 0; j < K; ++j) E.col(j) = mesh.V.row(x.ids[std::size_t(j) + 1]).transpose() - v0;
@@ -104,8 +104,8 @@ __attribute__((always_inline)) inline bool simplex_system(const TetMesh4& mesh, 
   return x.G.allFinite() && x.T.allFinite();
 }
 
-__attribute__((always_inline)) inline bool system_of(const TetMesh4& mesh, const Eigen::MatrixXd& field,
-                                                     const Eigen::MatrixXd& normals, Simplex& x) {
+__attribute__((always_inline)) inline bool system_of(const TetMesh4& mesh, const Points4& field, const Points4& normals,
+                                                     Simplex& x) {
   switch (x.size) {
     case 2:
       return simplex_system<1>(mesh, field, normals, x);
@@ -157,8 +157,8 @@ double hermite_root(double a, double b, double da, double db) {
 // One pass of neighbour averaging of a #V by 4 field (see TraceOptions::field_smoothing): every vertex takes the
 // normalised mean of the unit vectors at itself and at the vertices of its star (each counted once per incident
 // tet, in star order, so the result does not depend on the thread count). Zero vectors stay zero.
-Eigen::MatrixXd smooth_field(const TetMesh4& mesh, const VertexTets& adj, const Eigen::MatrixXd& field) {
-  Eigen::MatrixXd out = Eigen::MatrixXd::Zero(field.rows(), 4);
+Points4 smooth_field(const TetMesh4& mesh, const VertexTets& adj, const Points4& field) {
+  Points4 out = Points4::Zero(field.rows(), 4);
   tbb::parallel_for(tbb::blocked_range<Eigen::Index>(0, mesh.vertex_count()), [&](const auto& r) {
     for (Eigen::Index v = r.begin(); v != r.end(); ++v) {
       if (!(field.row(v).squaredNorm() > 0.0)) continue;
@@ -174,8 +174,8 @@ Eigen::MatrixXd smooth_field(const TetMesh4& mesh, const VertexTets& adj, const 
 
 // Unit vertex normals of the 3-manifold: the sum of the incident tets' normals (each |cross4| = 6 x volume),
 // summed in the star's tet order, so the result does not depend on the thread count.
-Eigen::MatrixXd vertex_normals(const TetMesh4& mesh, const VertexTets& adj) {
-  Eigen::MatrixXd normals = Eigen::MatrixXd::Zero(mesh.vertex_count(), 4);
+Points4 vertex_normals(const TetMesh4& mesh, const VertexTets& adj) {
+  Points4 normals = Points4::Zero(mesh.vertex_count(), 4);
   tbb::parallel_for(tbb::blocked_range<Eigen::Index>(0, mesh.vertex_count()), [&](const auto& r) {
     for (Eigen::Index v = r.begin(); v != r.end(); ++v) {
       Eigen::Vector4d sum = Eigen::Vector4d::Zero();
@@ -683,10 +683,10 @@ class Tracer {
   const TetMesh4& mesh_;
   const Eigen::VectorXd& s_;
   const TraceOptions& options_;
-  Eigen::MatrixXd field_;  // #V by 4, smoothed
+  Points4 field_;  // #V by 4, smoothed (row-major: a vertex's row in one cache line)
   SharedStars stars_;
   const VertexTets& adj_;
-  Eigen::MatrixXd normals_;  // #V by 4 unit vertex normals
+  Points4 normals_;  // #V by 4 unit vertex normals
   // #T by 4: the tet across the face opposite each tet vertex (kNone on the boundary, kMany where more than two
   // tets share the face), filled as traces cross faces.
   static constexpr int kUnknown = -2, kNone = -1, kMany = -3;
