@@ -5,10 +5,12 @@
 
 #include <array>
 #include <cmath>
+#include <cstdio>
 #include <filesystem>
 #include <fstream>
 #include <iomanip>
 #include <nlohmann/json.hpp>
+#include <sstream>
 #include <utility>
 #include <vector>
 
@@ -249,6 +251,37 @@ TEST(Pipeline, AlignBboxReturnsOutputsInEachInputsFrame) {
   EXPECT_NEAR(box.center().z(), 1.0, tolerance);
   for (Eigen::Index v = 0; v < r.target_labels.rows(); ++v)
     ASSERT_NEAR((r.target_labels.row(v) - Eigen::RowVector3d(10, 0, 0)).norm(), 0.5, 5e-3);  // facet sag of a 48-gon
+}
+
+TEST(Pipeline, LabelsFileHoldsEveryLabelAsPrintfsSeventeenDigits) {
+  // labels.txt: one line per vertex of target.obj, three numbers each in "%.17g" (what the stream with
+  // setprecision(17) wrote before std::to_chars), so every label reads back to the same double.
+  const std::filesystem::path dir = std::filesystem::path(::testing::TempDir()) / "labels_text";
+  std::filesystem::remove_all(dir);
+  PipelineOptions o = small_options("sphere:res=24", "torus", "cg-amg");
+  o.output_dir = dir.string();
+  const PipelineResult r = run_pipeline(o);
+  std::ifstream in(dir / "labels.txt");
+  ASSERT_TRUE(in);
+  std::string line;
+  Eigen::Index lines = 0;
+  while (std::getline(in, line)) {
+    std::istringstream fields(line);
+    std::string token;
+    int count = 0;
+    while (fields >> token) {
+      const double value = std::strtod(token.c_str(), nullptr);
+      char expected[40];
+      std::snprintf(expected, sizeof expected, "%.17g", value);
+      ASSERT_EQ(token, expected) << "line " << lines + 1;
+      ++count;
+    }
+    ASSERT_EQ(count, 3) << "line " << lines + 1 << ": " << line;
+    ++lines;
+  }
+  EXPECT_EQ(lines, r.target_seams.V.rows());
+  EXPECT_GT(lines, 100);
+  std::filesystem::remove_all(dir);
 }
 
 }  // namespace
