@@ -1,0 +1,62 @@
+// The pipeline's load stage (DESIGN.md, stage "load"): reading a model file (io/mesh_io.h) and the closed-manifold
+// check of the surface read (mesh/surface.h, validate_surface), on the Table II models.
+//
+// BM_ReadSurface/<model>: read_surface alone; counters vertices, faces.
+// BM_ValidateSurface/<model>: validate_surface(surface, true) of the surface read once, not timed.
+// Run: morphmap_bench --benchmark_filter='BM_(Read|Validate)Surface' --benchmark_repetitions=5
+#include <benchmark/benchmark.h>
+
+#include <filesystem>
+#include <string>
+
+#include "bench/bench_cases.h"
+
+namespace {
+
+std::string model_path(const std::string& file, std::string& error) {
+  const std::string path = bench::models_dir() + "/" + file;
+  if (!std::filesystem::exists(path)) error = path + " not found: set MORPHMAP_MODELS to the models folder";
+  return path;
+}
+
+void BM_ReadSurface(benchmark::State& state, const std::string& file) {
+  std::string error;
+  const std::string path = model_path(file, error);
+  if (!error.empty()) {
+    state.SkipWithError(error.c_str());
+    return;
+  }
+  morphmap::Surface surface;
+  for (auto _ : state) {
+    surface = morphmap::read_surface(path);
+    benchmark::DoNotOptimize(surface.V.data());
+  }
+  state.counters["vertices"] = double(surface.V.rows());
+  state.counters["faces"] = double(surface.F.rows());
+}
+
+void BM_ValidateSurface(benchmark::State& state, const std::string& file) {
+  std::string error;
+  const std::string path = model_path(file, error);
+  if (!error.empty()) {
+    state.SkipWithError(error.c_str());
+    return;
+  }
+  const morphmap::Surface surface = morphmap::read_surface(path);
+  morphmap::SurfaceCheck check;
+  for (auto _ : state) {
+    check = morphmap::validate_surface(surface, true);
+    benchmark::DoNotOptimize(check.edges);
+  }
+  state.counters["edges"] = double(check.edges);
+  state.counters["components"] = double(check.components);
+}
+
+BENCHMARK_CAPTURE(BM_ReadSurface, horse, std::string("horse.obj"))->Unit(benchmark::kMillisecond);
+BENCHMARK_CAPTURE(BM_ReadSurface, happy_buddha, std::string("happy_buddha_100k.obj"))->Unit(benchmark::kMillisecond);
+BENCHMARK_CAPTURE(BM_ReadSurface, cow, std::string("cow.off"))->Unit(benchmark::kMillisecond);
+BENCHMARK_CAPTURE(BM_ValidateSurface, horse, std::string("horse.obj"))->Unit(benchmark::kMillisecond);
+BENCHMARK_CAPTURE(BM_ValidateSurface, happy_buddha, std::string("happy_buddha_100k.obj"))
+    ->Unit(benchmark::kMillisecond);
+
+}  // namespace
