@@ -13,19 +13,17 @@
 
 namespace {
 
-std::string model_path(const std::string& file, std::string& error) {
-  const std::string path = bench::models_dir() + "/" + file;
-  if (!std::filesystem::exists(path)) error = path + " not found: set MORPHMAP_MODELS to the models folder";
-  return path;
+// The model's path in `path`; false, with the benchmark skipped, when the file is missing.
+bool find_model(benchmark::State& state, const std::string& file, std::string& path) {
+  path = bench::models_dir() + "/" + file;
+  if (std::filesystem::exists(path)) return true;
+  state.SkipWithError((path + " not found: set MORPHMAP_MODELS to the models folder").c_str());
+  return false;
 }
 
 void BM_ReadSurface(benchmark::State& state, const std::string& file) {
-  std::string error;
-  const std::string path = model_path(file, error);
-  if (!error.empty()) {
-    state.SkipWithError(error.c_str());
-    return;
-  }
+  std::string path;
+  if (!find_model(state, file, path)) return;
   morphmap::Surface surface;
   for (auto _ : state) {
     surface = morphmap::read_surface(path);
@@ -36,12 +34,8 @@ void BM_ReadSurface(benchmark::State& state, const std::string& file) {
 }
 
 void BM_ValidateSurface(benchmark::State& state, const std::string& file) {
-  std::string error;
-  const std::string path = model_path(file, error);
-  if (!error.empty()) {
-    state.SkipWithError(error.c_str());
-    return;
-  }
+  std::string path;
+  if (!find_model(state, file, path)) return;
   const morphmap::Surface surface = morphmap::read_surface(path);
   morphmap::SurfaceCheck check;
   for (auto _ : state) {
