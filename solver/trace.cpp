@@ -736,28 +736,30 @@ const TetMesh4& checked(const TetMesh4& mesh, const Eigen::VectorXd& s, const Ei
   return mesh;
 }
 
-}  // namespace
-
-namespace {
-
-// The start points in Morton (Z-curve) order of their first vertex's position on a 1024^3 grid over the mesh's
-// box, ties in start order: neighbouring traces cross the same tets, so a thread that traces them one after
-// another finds those tets' rows in its cache (BM_Trace/cow_horse 961-963 -> 942-944 ms, two alternating pairs).
-// Only the schedule changes: every trace is independent and stored at its own index.
+// The start points in Morton (Z-curve) order of their first vertex's position on a 1024^3 grid over those
+// positions' box, ties in start order: neighbouring traces cross the same tets, so a thread that traces them one
+// after another finds those tets' rows in its cache (BM_Trace/cow_horse 961-963 -> 942-944 ms, two alternating
+// pairs). Only the schedule changes: every trace is independent and stored at its own index.
 std::vector<std::size_t> spatial_order(const TetMesh4& mesh, const std::vector<MeshPoint>& starts) {
   const std::size_t count = starts.size();
   std::vector<std::size_t> order(count);
   std::iota(order.begin(), order.end(), std::size_t(0));
-  if (count == 0 || mesh.vertex_count() == 0) return order;
-  const Eigen::Vector3d lo = mesh.V.leftCols<3>().colwise().minCoeff().transpose();
-  const Eigen::Vector3d size = mesh.V.leftCols<3>().colwise().maxCoeff().transpose() - lo;
+  auto vertex_of = [&](std::size_t i) {
+    const int v = starts[i].ids[0];
+    return v >= 0 && v < mesh.vertex_count() ? v : -1;  // -1: traced as invalid, anywhere in the order
+  };
+  Eigen::AlignedBox3d box;
+  for (std::size_t i = 0; i < count; ++i)
+    if (vertex_of(i) >= 0) box.extend(mesh.V.row(vertex_of(i)).head<3>().transpose());
+  if (box.isEmpty()) return order;
+  const Eigen::Vector3d size = box.sizes();
   std::vector<std::uint32_t> key(count, 0);
   for (std::size_t i = 0; i < count; ++i) {
-    const int v = starts[i].ids[0];
-    if (v < 0 || v >= mesh.vertex_count()) continue;  // traced as invalid; anywhere in the order
+    const int v = vertex_of(i);
+    if (v < 0) continue;
     std::uint32_t cell[3];
     for (int a = 0; a < 3; ++a) {
-      const double u = size(a) > 0.0 ? (mesh.V(v, a) - lo(a)) / size(a) : 0.0;
+      const double u = size(a) > 0.0 ? (mesh.V(v, a) - box.min()(a)) / size(a) : 0.0;
       cell[a] = std::uint32_t(std::clamp(u, 0.0, 1.0) * 1023.0);
     }
     std::uint32_t k = 0;
