@@ -69,8 +69,10 @@ Weights rates(const Simplex& x, const Weights& w) {
 }
 
 // Forced inline: out of line (once choose() and descend() shared the simplex enumeration) it cost cow -> horse's
-// trace 20% more time.
-template <int K>
+// trace 20% more time. Without kFlow only the weight gradients are set: the steepest descent of s needs nothing else,
+// and the field and normal rows, the tet's normal and the step bound were 6% of cow -> horse's tracer instructions
+// there (callgrind); the vertex field is finite (checked), so the test below rejects the same simplices.
+template <int K, bool kFlow>
 __attribute__((always_inline)) inline bool simplex_system(const TetMesh4& mesh, const Points4& field,
                                                           const Points4& normals, Simplex& x) {
   Eigen::Matrix<double, 4, K> E;
@@ -84,6 +86,7 @@ __attribute__((always_inline)) inline bool simplex_system(const TetMesh4& mesh, 
   if (!(gram.determinant() > 1e-20 * scale)) return false;
   x.G.setZero();
   x.G.leftCols(K) = E * gram.inverse();
+  if (!kFlow) return x.G.allFinite();
   // Maxima of squared norms and one square root each: sqrt is monotone and correctly rounded, so this is bitwise
   // the maximum of the norms, at 2 square roots a simplex instead of 11 (a tenth of cow -> horse's tracing time).
   double largest_gradient2 = 0.0, spread2 = 0.0;
@@ -104,15 +107,16 @@ __attribute__((always_inline)) inline bool simplex_system(const TetMesh4& mesh, 
   return x.G.allFinite() && x.T.allFinite();
 }
 
+template <bool kFlow>
 __attribute__((always_inline)) inline bool system_of(const TetMesh4& mesh, const Points4& field, const Points4& normals,
                                                      Simplex& x) {
   switch (x.size) {
     case 2:
-      return simplex_system<1>(mesh, field, normals, x);
+      return simplex_system<1, kFlow>(mesh, field, normals, x);
     case 3:
-      return simplex_system<2>(mesh, field, normals, x);
+      return simplex_system<2, kFlow>(mesh, field, normals, x);
     case 4:
-      return simplex_system<3>(mesh, field, normals, x);
+      return simplex_system<3, kFlow>(mesh, field, normals, x);
     default:
       return false;
   }
@@ -477,8 +481,9 @@ class Tracer {
   }
 
   // Calls visit(x) for every simplex x of `size` vertices that holds the support (ids[0..n) first in x.ids, in that
-  // order) and has a weight system: sub-simplices of the candidate tets, each face or edge once, in candidate order.
-  template <class Visit>
+  // order) and has a weight system (kFlow: that of the flow, else the weight gradients only; see simplex_system):
+  // sub-simplices of the candidate tets, each face or edge once, in candidate order.
+  template <bool kFlow, class Visit>
   void simplices_holding(const std::array<int, 4>& ids, int n, const std::vector<int>& candidates, int size,
                          Visit&& visit) const {
     thread_local std::vector<std::array<int, 4>> seen;
@@ -509,10 +514,18 @@ class Tracer {
           for (int i = 1; i < size; ++i)  // insertion sort of at most 3 ids
             for (int j = i; j > 0 && key[std::size_t(j - 1)] > key[std::size_t(j)]; --j)
               std::swap(key[std::size_t(j - 1)], key[std::size_t(j)]);
-          if (std::find(seen.begin(), seen.end(), key) != seen.end()) continue;
+          // Faces and edges have at most 3 ids (the fourth is -1 in every key). Compared by hand: std::array's == is a
+          // call to memcmp here, 5% of cow -> horse's tracer instructions (callgrind).
+          bool repeated = false;
+          for (const std::array<int, 4>& other : seen)
+            if (other[0] == key[0] && other[1] == key[1] && other[2] == key[2]) {
+              repeated = true;
+              break;
+            }
+          if (repeated) continue;
           seen.push_back(key);
         }
-        if (!system_of(mesh_, field_, normals_, x)) continue;
+        if (!system_of<kFlow>(mesh_, field_, normals_, x)) continue;
         visit(x);
       }
     }
@@ -521,11 +534,11 @@ class Tracer {
   // simplices_holding over the classes in order, tets first, then faces and edges together (their spans do not nest
   // like a tet's and its faces', and a flow along an edge projects onto a skew face as a feasible but sideways
   // direction); faces and edges only when no tet was found (`found`, which visit sets).
-  template <class Visit>
+  template <bool kFlow, class Visit>
   void simplices_by_class(const std::array<int, 4>& ids, int n, const std::vector<int>& candidates, const bool& found,
                           Visit&& visit) const {
     for (int size = 4; size >= std::max(2, n) && !(found && size == 3); --size)
-      simplices_holding(ids, n, candidates, size, visit);
+      simplices_holding<kFlow>(ids, n, candidates, size, visit);
   }
 
   // Whether rates r (in x, support first) move the point into x: every weight outside the support grows (a rate
@@ -585,15 +598,15 @@ class Tracer {
       // on cow -> horse.
       thread_local std::vector<int> one;
       one.assign(1, candidates[0] == from_tet ? candidates[1] : candidates[0]);
-      simplices_holding(ids, n, one, 4, visit);
+      simplices_holding<true>(ids, n, one, 4, visit);
       if (found) return true;
       one.assign(1, from_tet);
-      simplices_holding(ids, n, one, 4, visit);
+      simplices_holding<true>(ids, n, one, 4, visit);
       if (found) return true;
-      simplices_holding(ids, n, candidates, 3, visit);
+      simplices_holding<true>(ids, n, candidates, 3, visit);
       return found;
     }
-    simplices_by_class(ids, n, candidates, found, visit);
+    simplices_by_class<true>(ids, n, candidates, found, visit);
     return found;
   }
 
@@ -615,7 +628,7 @@ class Tracer {
       Weights best_r;
       double best_slope = 0.0;
       bool found = false;
-      simplices_by_class(ids, n, candidates, found, [&](const Simplex& x) {
+      simplices_by_class<false>(ids, n, candidates, found, [&](const Simplex& x) {
         Eigen::Vector4d g = Eigen::Vector4d::Zero();  // grad s in x's span
         for (int j = 1; j < x.size; ++j) g += (s_(x.ids[std::size_t(j)]) - s_(x.ids[0])) * x.G.col(j - 1);
         Weights r = Weights::Zero();
