@@ -466,7 +466,7 @@ PipelineResult run_pipeline(const PipelineOptions& options) {
     gradient = compute_gradient(mesh, laplace.s, stars);
     // Only the vertex field is read from here on: the per-tet gradients and volumes (40 bytes a tet, 0.84 GB at 21 M
     // tets) are released before the tracer, the slices and the outputs allocate theirs.
-    gradient.tet_gradient = Eigen::MatrixXd();
+    gradient.tet_gradient = Points4();
     gradient.tet_volume = Eigen::VectorXd();
     seconds["gradient"] = gradient.seconds;
     progress.stage("gradient", gradient.seconds);

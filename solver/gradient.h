@@ -10,7 +10,9 @@
 namespace morphmap {
 
 struct GradientResult {
-  Eigen::MatrixXd tet_gradient;  ///< #T by 4, gradient of s in each tet (lies in the tet's hull)
+  /// #T by 4, gradient of s in each tet (lies in the tet's hull). Row-major: the vertex pass reads one tet's row per
+  /// star entry, in mesh (random) order.
+  Points4 tet_gradient;
   Eigen::MatrixXd
       vertex_field;  ///< #V by 4, volume-weighted mean of incident tet gradients, unit length (0 where undefined)
   Eigen::VectorXd tet_volume;  ///< #T 3-volumes
