@@ -109,6 +109,13 @@ void add_pipeline_options(CLI::App& cmd, PipelineOptions& o) {
                  "connectivity)")
       ->check(CLI::IsMember({"all", "topological", "texture", "none"}))
       ->capture_default_str();
+  cmd.add_option_function<std::string>(
+         "--fold-repair", [&o](const std::string& value) { o.untangle.enabled = value == "on"; },
+         "Repair folded and collapsed triangles of the target's map by local untangling in charts of the "
+         "source, then symmetric Dirichlet smoothing around them (on or off; the closest-point method is never "
+         "repaired)")
+      ->check(CLI::IsMember({"on", "off"}))
+      ->default_str("off");
   cmd.add_flag("--ply", o.write_ply, "Also write target.ply");
   cmd.add_option("--threads", o.threads, "Worker threads (0 = all cores)")->check(CLI::NonNegativeNumber);
   cmd.add_option_function<std::string>(

@@ -616,9 +616,37 @@ PipelineResult run_pipeline(const PipelineOptions& options) {
   } else {
     trace_target_labels(result.target);
   }
-  const std::vector<SurfaceHit> hits = locator.closest_all(result.target.labels);
+  std::vector<SurfaceHit> hits = locator.closest_all(result.target.labels);
   seconds["map"] = seconds_since(start) + locator_seconds - extracted_check_b_seconds;  // that check is topology's
   progress.stage("map", seconds["map"]);
+
+  // Fold repair of B's map (mesh/untangle.h). The repaired labels are points of A; the topological seam split reads
+  // the labels of B's 4D vertices, so they move with them (a user's mesh has no 4D vertices).
+  UntangleResult untangle;
+  Eigen::MatrixXd target_seam_labels;  // the 4D labels the target's seam split reads, when the repair moved some
+  {
+    UntangleOptions untangle_options = options.untangle;
+    untangle_options.seam_threshold = options.seams.label_threshold;
+    untangle_options.enabled = untangle_options.enabled && !closest_point;
+    // Off (the default), not even the classification runs: it costs a closest-point query per triangle.
+    const Eigen::MatrixXd before = untangle_options.enabled ? points_of(hits) : Eigen::MatrixXd();
+    Eigen::MatrixXd repaired = before;
+    if (untangle_options.enabled)
+      untangle = untangle_labels(A, locator, result.target.V, result.target.F, repaired, untangle_options);
+    if (untangle.vertices_moved > 0) {
+      if (!user_target) target_seam_labels = target_labels_4d.size() > 0 ? target_labels_4d : seam_labels;
+      for (Eigen::Index i = 0; i < repaired.rows(); ++i) {
+        if (repaired.row(i) == before.row(i)) continue;
+        result.target.labels.row(i) = repaired.row(i);
+        hits[std::size_t(i)] = locator.closest(repaired.row(i).transpose());
+        if (!user_target) target_seam_labels.row(result.target.source_edge(i, 0)) = repaired.row(i);
+      }
+    }
+    if (untangle_options.enabled) {
+      seconds["repair"] = untangle.seconds;
+      progress.stage("repair", untangle.seconds);
+    }
+  }
 
   start = Clock::now();
   if (A.has_uv()) result.target_uv = uv_at(A, hits);
@@ -649,8 +677,10 @@ PipelineResult run_pipeline(const PipelineOptions& options) {
     // A user's mesh has no provenance in the 4D mesh to cut along; its texture seams are still split.
     SeamOptions target_seam_options = seam_options;
     if (user_target) target_seam_options.topological = false;
-    result.target_seams = split_seams(result.target, mesh, target_labels_4d.size() > 0 ? target_labels_4d : seam_labels,
-                                      A, locator, target_seam_options);
+    const Eigen::MatrixXd& labels_4d = target_seam_labels.size() > 0 ? target_seam_labels
+                                       : target_labels_4d.size() > 0 ? target_labels_4d
+                                                                     : seam_labels;
+    result.target_seams = split_seams(result.target, mesh, labels_4d, A, locator, target_seam_options);
   }
   for (SliceOut& s : slices) s.seams = split_seams(s.mesh, mesh, seam_labels, A, locator, seam_options);
   const Eigen::MatrixXd seam_hits = points_of(locator.closest_all(result.target_seams.labels));
@@ -765,6 +795,23 @@ PipelineResult run_pipeline(const PipelineOptions& options) {
       {"min_volume_ratio", quality.min_volume_ratio},
       {"dihedral_histogram_10deg", quality.dihedral_histogram}};
   report["stretch"] = nlohmann::json::parse(stretch_json(stretch));
+  if (options.untangle.enabled && !closest_point)
+    report["fold_repair"] = {
+        {"enabled", true},
+        {"folded_before", untangle.folded_before},
+        {"collapsed_before", untangle.collapsed_before},
+        {"folded_after", untangle.folded_after},
+        {"collapsed_after", untangle.collapsed_after},
+        {"seam_triangles", untangle.seam_triangles},
+        {"region_vertices", untangle.region_vertices},
+        {"vertices_moved", untangle.vertices_moved},
+        {"moves", untangle.moves},
+        {"rounds", untangle.rounds},
+        {"sweeps", untangle.sweeps},
+        {"seconds", untangle.seconds},
+        {"note",
+         "counts on B before the seam split (seam triangles, whose labels span the seam threshold, not counted); "
+         "stretch measures target.obj after it"}};
   report["stretch_unsplit"] = nlohmann::json::parse(stretch_json(stretch_unsplit));
   report["seams"] = seams_json(result.target_seams, seam_options);
   report["solver"] = {{"name", laplace.report.backend},

@@ -11,6 +11,7 @@
 #include "mesh/morph.h"
 #include "mesh/seams.h"
 #include "mesh/slice.h"
+#include "mesh/untangle.h"
 #include "mesh/vim.h"
 #include "solver/laplace.h"
 #include "solver/trace.h"
@@ -49,9 +50,12 @@ struct PipelineOptions {
   /// entry into B through closest points on the extracted B, so a morph of a shape to itself maps its vertices to
   /// themselves; "closest" takes the label's closest point of A. The closest-point method always uses "closest".
   std::string source_projection = "inverse";
-  TransportOptions transport;      ///< upwind sweep tolerances (the sweep also labels the 4D mesh for seams)
-  TraceOptions trace;              ///< characteristic tracing tolerances
-  SeamOptions seams;               ///< topological and texture seam splitting of target.obj and slices (§8)
+  TransportOptions transport;  ///< upwind sweep tolerances (the sweep also labels the 4D mesh for seams)
+  TraceOptions trace;          ///< characteristic tracing tolerances
+  SeamOptions seams;           ///< topological and texture seam splitting of target.obj and slices (§8)
+  /// Repair of folded and collapsed triangles of B's map before the seam split (mesh/untangle.h; off by default,
+  /// --fold-repair on); the closest-point baseline is never repaired. Its seam threshold is seams.label_threshold.
+  UntangleOptions untangle;
   std::string seams_mode = "all";  ///< "all", "topological", "texture" or "none": overrides seams.topological/texture
   std::vector<double> slices;      ///< morph times in (0, 1) at which to write slice_<t>.obj
   bool write_ply = false;          ///< also write target.ply

@@ -1,0 +1,463 @@
+// Fold repair of the label map (see untangle.h). Written by hand: libigl and CGAL untangle or parameterise whole
+// disks with fixed boundaries in the plane; none repairs patches of a map into a curved surface in place, keeping
+// the rest of the map, which is what the morph's correspondence needs.
+#include "mesh/untangle.h"
+
+#include <tbb/blocked_range.h>
+#include <tbb/parallel_for.h>
+
+#include <Eigen/Dense>
+#include <algorithm>
+#include <chrono>
+#include <cmath>
+#include <limits>
+#include <numeric>
+#include <string>
+#include <vector>
+
+#include "mesh/errors.h"
+
+namespace morphmap {
+
+namespace {
+
+enum : char { kGood = 0, kFolded = 1, kCollapsed = 2, kSeam = 3 };
+
+bool bad(char state) { return state == kFolded || state == kCollapsed; }
+
+/// Triangles of each vertex (compressed rows).
+struct VertexFaces {
+  std::vector<int> start, faces;
+  VertexFaces(const TriIndices& F, Eigen::Index vertex_count) : start(std::size_t(vertex_count) + 1, 0) {
+    for (Eigen::Index f = 0; f < F.rows(); ++f)
+      for (int k = 0; k < 3; ++k) ++start[std::size_t(F(f, k)) + 1];
+    std::partial_sum(start.begin(), start.end(), start.begin());
+    faces.resize(std::size_t(start.back()));
+    std::vector<int> cursor(start.begin(), start.end() - 1);
+    for (Eigen::Index f = 0; f < F.rows(); ++f)
+      for (int k = 0; k < 3; ++k) faces[std::size_t(cursor[std::size_t(F(f, k))]++)] = int(f);
+  }
+  int begin(int v) const { return start[std::size_t(v)]; }
+  int end(int v) const { return start[std::size_t(v) + 1]; }
+  int face(int j) const { return faces[std::size_t(j)]; }
+};
+
+/// Signed area of the triangle (0, a, b) in a chart.
+double area(const Eigen::Vector2d& a, const Eigen::Vector2d& b) { return 0.5 * (a.x() * b.y() - a.y() * b.x()); }
+
+/// A vertex's triangles in the chart of its label: the tangent plane of A there, origin at the label. a[k], b[k]
+/// are the other corners of its k-th triangle, counter-clockwise after it. The smoothing also keeps each
+/// triangle's shape on B (scaled to A's area) and whether it is positive in the chart.
+struct Ring {
+  Eigen::Vector3d origin, e1, e2;
+  std::vector<Eigen::Vector2d> a, b;
+  std::vector<Eigen::Matrix2d> inverse_shape;  // P^-1, P the triangle's B edges from the vertex in its own plane
+  std::vector<double> shape_det, shape_area;
+  std::vector<char> active;
+};
+
+/// The position x that maximises the smallest signed area of the triangles (x, a_k, b_k), each area c_k + g_k . x
+/// linear in x: the best of the points where three areas are equal (the maximum of a minimum of linear functions
+/// lies at a vertex of their upper envelope, bounded here since the areas of a closed ring sum to a constant).
+/// `best` starts at the current position; returns the smallest area at the result.
+double max_min_area(const Ring& ring, Eigen::Vector2d& best) {
+  const std::size_t m = ring.a.size();
+  std::vector<Eigen::Vector2d> g(m);
+  std::vector<double> c(m);
+  for (std::size_t k = 0; k < m; ++k) {
+    // 2 area(x, a, b) = (a - x) x (b - x) = a x b + x . (a_y - b_y, b_x - a_x)
+    c[k] = area(ring.a[k], ring.b[k]);
+    g[k] = 0.5 * Eigen::Vector2d(ring.a[k].y() - ring.b[k].y(), ring.b[k].x() - ring.a[k].x());
+  }
+  auto smallest = [&](const Eigen::Vector2d& x) {
+    double low = std::numeric_limits<double>::infinity();
+    for (std::size_t k = 0; k < m; ++k) low = std::min(low, c[k] + g[k].dot(x));
+    return low;
+  };
+  double best_value = smallest(best);
+  for (std::size_t i = 0; i < m; ++i)
+    for (std::size_t j = i + 1; j < m; ++j)
+      for (std::size_t l = j + 1; l < m; ++l) {
+        Eigen::Matrix2d M;
+        M.row(0) = (g[i] - g[j]).transpose();
+        M.row(1) = (g[i] - g[l]).transpose();
+        if (!(std::abs(M.determinant()) > 1e-300)) continue;
+        const Eigen::Vector2d x = M.inverse() * Eigen::Vector2d(c[j] - c[i], c[l] - c[i]);
+        if (!x.allFinite()) continue;
+        const double value = smallest(x);
+        if (value > best_value) {
+          best_value = value;
+          best = x;
+        }
+      }
+  return best_value;
+}
+
+/// Symmetric Dirichlet energy of the active triangles' maps from B (scaled) to the chart with the vertex at x,
+/// area(B)-weighted: |J|^2 + |J^-1|^2, which grows without bound as a triangle flattens (infinite once one is not
+/// positive). With `gradient`, also its gradient and a bound of its curvature along any direction, for the step.
+double dirichlet(const Ring& ring, const Eigen::Vector2d& x, Eigen::Vector2d* gradient, double* curvature) {
+  double total = 0.0;
+  if (gradient) gradient->setZero();
+  if (curvature) *curvature = 0.0;
+  for (std::size_t k = 0; k < ring.a.size(); ++k) {
+    if (!ring.active[k]) continue;
+    Eigen::Matrix2d Q;
+    Q.col(0) = ring.a[k] - x;
+    Q.col(1) = ring.b[k] - x;
+    const double d = Q.determinant();
+    if (!(d > 0.0)) return std::numeric_limits<double>::infinity();
+    const Eigen::Matrix2d J = Q * ring.inverse_shape[k];
+    // det J = d / det P, and |J^-1|^2 = |J|^2 / det(J)^2 for 2 by 2.
+    const double N = J.squaredNorm(), ratio = ring.shape_det[k] * ring.shape_det[k] / (d * d);
+    const double w = ring.shape_area[k];
+    total += w * N * (1.0 + ratio);
+    if (gradient) {
+      // J = J0 - x m^T with m the column sums of P^-1; grad d from d = (a - x) x (b - x).
+      const Eigen::Vector2d m = ring.inverse_shape[k].row(0).transpose() + ring.inverse_shape[k].row(1).transpose();
+      const Eigen::Vector2d grad_d(ring.a[k].y() - ring.b[k].y(), ring.b[k].x() - ring.a[k].x());
+      *gradient += w * (-2.0 * (J * m) * (1.0 + ratio) - 2.0 * N * ratio / d * grad_d);
+      if (curvature)
+        *curvature += w * (2.0 * m.squaredNorm() * (1.0 + ratio) + 6.0 * N * ratio / (d * d) * grad_d.squaredNorm());
+    }
+  }
+  return total;
+}
+
+class Untangler {
+ public:
+  Untangler(const Surface& A, const SurfaceLocator& locator, const Eigen::MatrixXd& V, const TriIndices& F,
+            Eigen::MatrixXd& labels, const UntangleOptions& options)
+      : A_(A), locator_(locator), V_(V), F_(F), labels_(labels), options_(options), vf_(F, V.rows()) {}
+
+  UntangleResult run() {
+    UntangleResult result;
+    const Eigen::Index nv = V_.rows(), nf = F_.rows();
+    classify_all();
+    auto count = [&](char which) { return std::int64_t(std::count(state_.begin(), state_.end(), which)); };
+    result.folded_before = count(kFolded);
+    result.collapsed_before = count(kCollapsed);
+    result.seam_triangles = count(kSeam);
+    if (!options_.enabled || result.folded_before + result.collapsed_before == 0) {
+      result.folded_after = result.folded_before;
+      result.collapsed_after = result.collapsed_before;
+      return result;
+    }
+    // Vertices of seam triangles stay where they are: the seam split reads their labels on either side.
+    wall_.assign(std::size_t(nv), 0);
+    for (Eigen::Index f = 0; f < nf; ++f)
+      if (state_[std::size_t(f)] == kSeam)
+        for (int k = 0; k < 3; ++k) wall_[std::size_t(F_(f, k))] = 1;
+    moved_.assign(std::size_t(nv), 0);
+    face_of_.resize(std::size_t(nv));
+    const std::vector<SurfaceHit> hits = locator_.closest_all(labels_);
+    for (Eigen::Index v = 0; v < nv; ++v) face_of_[std::size_t(v)] = hits[std::size_t(v)].face;
+    scale_ = std::sqrt(surface_area(A_.V, A_.F) / surface_area(V_, F_.cast<int>()));
+
+    // The region: the bad triangles' vertices and `rings` rings around them, growing by `grow_rings` a round
+    // while rounds right enough triangles.
+    level_.assign(std::size_t(nv), -1);
+    for (Eigen::Index f = 0; f < nf; ++f)
+      if (bad(state_[std::size_t(f)]))
+        for (int k = 0; k < 3; ++k) {
+          const int v = F_(f, k);
+          if (level_[std::size_t(v)] >= 0 || wall_[std::size_t(v)]) continue;
+          level_[std::size_t(v)] = 0;
+          frontier_.push_back(v);
+        }
+    region_ = frontier_;
+    grow(options_.rings);
+
+    // Untangling (local optimisation, Freitag and Plassmann 2000): each vertex with an inverted or nearly flat
+    // triangle moves to where its smallest triangle is largest.
+    std::int64_t previous = result.folded_before + result.collapsed_before;
+    for (int round = 0; round < options_.max_rounds && !region_.empty(); ++round) {
+      result.rounds = round + 1;
+      const auto classes = colour_classes();
+      const std::vector<char> everyone(std::size_t(V_.rows()), 1);
+      for (int sweep = 0; sweep < options_.sweeps; ++sweep) {
+        ++result.sweeps;
+        const std::int64_t moves =
+            run_sweep(classes, everyone, nullptr, [&](int v, Ring& ring) { return untangle_vertex(v, ring); });
+        result.moves += moves;
+        if (moves == 0) break;
+      }
+      const std::int64_t now = reclassify_region();
+      // Growing on pays only while rounds right triangles (where B has handles, some folds are forced).
+      if (now == 0 || double(now) > (1.0 - options_.min_round_gain) * double(previous)) break;
+      previous = now;
+      grow(options_.grow_rings);
+    }
+    grow(options_.smoothing_rings);
+    result.region_vertices = std::int64_t(region_.size());
+
+    // Smoothing: symmetric Dirichlet descent, vertex by vertex, of the triangles positive in each chart; no step
+    // that keeps them positive folds one, and the squeezed patches the untangling righted spread out.
+    // Each sweep visits only the vertices next to one that moved in the sweep before: the patches far from the
+    // squeezed ones settle within a few sweeps, and those take many.
+    const auto classes = colour_classes();
+    std::vector<char> active(std::size_t(nv), 1), next(std::size_t(nv), 0);
+    for (int sweep = 0; sweep < options_.smoothing_sweeps; ++sweep) {
+      const std::int64_t moves =
+          run_sweep(classes, active, &next, [&](int v, Ring& ring) { return smooth_vertex(v, ring); });
+      result.smoothing_moves += moves;
+      if (moves == 0) break;
+      active.swap(next);
+      std::fill(next.begin(), next.end(), 0);
+    }
+    reclassify_region();
+    result.folded_after = count(kFolded);
+    result.collapsed_after = count(kCollapsed);
+    result.vertices_moved = std::int64_t(std::count(moved_.begin(), moved_.end(), char(1)));
+    return result;
+  }
+
+ private:
+  /// Unnormalised outward normal of A's face f.
+  Eigen::Vector3d face_normal(int f) const {
+    const Eigen::Vector3d a0 = A_.V.row(A_.F(f, 0)), a1 = A_.V.row(A_.F(f, 1)), a2 = A_.V.row(A_.F(f, 2));
+    return (a1 - a0).cross(a2 - a0);
+  }
+
+  /// DESIGN.md's tests as measure_stretch applies them: collapsed below collapse_ratio times the mean preimage
+  /// area, folded when the preimage's normal opposes that of A's face nearest its centroid.
+  char classify(Eigen::Index f) const {
+    const Eigen::Vector3d p0 = labels_.row(F_(f, 0)), p1 = labels_.row(F_(f, 1)), p2 = labels_.row(F_(f, 2));
+    const Eigen::Vector3d n = (p1 - p0).cross(p2 - p0);
+    if (!(0.5 * n.norm() > collapse_area_)) return kCollapsed;
+    return n.dot(face_normal(locator_.closest((p0 + p1 + p2) / 3.0).face)) < 0.0 ? kFolded : kGood;
+  }
+
+  void classify_all() {
+    const Eigen::Index nf = F_.rows();
+    const double seam_length = options_.seam_threshold * bounding_box(A_.V).diagonal().norm();
+    state_.assign(std::size_t(nf), kGood);
+    double area_sum = 0.0;
+    for (Eigen::Index f = 0; f < nf; ++f) {
+      const Eigen::Vector3d p0 = labels_.row(F_(f, 0)), p1 = labels_.row(F_(f, 1)), p2 = labels_.row(F_(f, 2));
+      area_sum += 0.5 * (p1 - p0).cross(p2 - p0).norm();
+      if ((p1 - p0).norm() > seam_length || (p2 - p1).norm() > seam_length || (p0 - p2).norm() > seam_length)
+        state_[std::size_t(f)] = kSeam;
+    }
+    collapse_area_ = options_.collapse_ratio * area_sum / double(std::max<Eigen::Index>(nf, 1));
+    tbb::parallel_for(Eigen::Index(0), nf, [&](Eigen::Index f) {
+      if (state_[std::size_t(f)] != kSeam) state_[std::size_t(f)] = classify(f);
+    });
+  }
+
+  /// Classifies the triangles of the region's vertices again; returns the bad triangles of B.
+  std::int64_t reclassify_region() {
+    std::vector<int> faces;
+    for (const int v : region_)
+      for (int j = vf_.begin(v); j < vf_.end(v); ++j) faces.push_back(vf_.face(j));
+    std::sort(faces.begin(), faces.end());
+    faces.erase(std::unique(faces.begin(), faces.end()), faces.end());
+    tbb::parallel_for(std::size_t(0), faces.size(), [&](std::size_t i) {
+      if (state_[std::size_t(faces[i])] != kSeam) state_[std::size_t(faces[i])] = classify(faces[i]);
+    });
+    return std::int64_t(std::count_if(state_.begin(), state_.end(), bad));
+  }
+
+  void grow(int rings) {
+    const std::int64_t limit = std::int64_t(options_.max_region_fraction * double(V_.rows()));
+    for (int ring = 0; ring < rings && std::int64_t(region_.size()) < limit; ++ring) {
+      std::vector<int> next;
+      for (const int v : frontier_)
+        for (int j = vf_.begin(v); j < vf_.end(v); ++j) {
+          const int f = vf_.face(j);
+          if (state_[std::size_t(f)] == kSeam) continue;
+          for (int k = 0; k < 3; ++k) {
+            const int u = F_(f, k);
+            if (level_[std::size_t(u)] >= 0 || wall_[std::size_t(u)]) continue;
+            level_[std::size_t(u)] = 1;
+            next.push_back(u);
+          }
+        }
+      region_.insert(region_.end(), next.begin(), next.end());
+      frontier_ = std::move(next);
+    }
+    std::sort(region_.begin(), region_.end());
+  }
+
+  /// The region's vertices by colour, greedily in vertex order: no two of a class share a triangle, so a class
+  /// moves in parallel with each vertex seeing the same neighbours as in any order, and the result does not depend
+  /// on the thread count.
+  std::vector<std::vector<int>> colour_classes() const {
+    std::vector<int> colour(std::size_t(V_.rows()), -1);
+    std::vector<std::vector<int>> classes;
+    std::vector<char> taken;
+    for (const int v : region_) {
+      taken.assign(classes.size() + 1, 0);
+      for (int j = vf_.begin(v); j < vf_.end(v); ++j)
+        for (int k = 0; k < 3; ++k) {
+          const int c = colour[std::size_t(F_(vf_.face(j), k))];
+          if (c >= 0) taken[std::size_t(c)] = 1;
+        }
+      const int c = int(std::find(taken.begin(), taken.end(), 0) - taken.begin());
+      colour[std::size_t(v)] = c;
+      if (c == int(classes.size())) classes.emplace_back();
+      classes[std::size_t(c)].push_back(v);
+    }
+    return classes;
+  }
+
+  /// One sweep over the vertices of `classes` with active[v] set: each class in parallel, the classes in order.
+  /// step(v, ring) returns whether v moved (enough to count). The vertices sharing a triangle with one that moved
+  /// are set in `next` (when given), the active set of the next sweep. Returns the moves.
+  template <class Step>
+  std::int64_t run_sweep(const std::vector<std::vector<int>>& classes, const std::vector<char>& active,
+                         std::vector<char>* next, const Step& step) {
+    std::int64_t moves = 0;
+    for (const std::vector<int>& members : classes) {
+      std::vector<char> moved(members.size(), 0);
+      tbb::parallel_for(tbb::blocked_range<std::size_t>(0, members.size(), 64),
+                        [&](const tbb::blocked_range<std::size_t>& range) {
+                          Ring ring;
+                          for (std::size_t i = range.begin(); i < range.end(); ++i)
+                            if (active[std::size_t(members[i])]) moved[i] = step(members[i], ring) ? 1 : 0;
+                        });
+      for (std::size_t i = 0; i < members.size(); ++i) {
+        if (!moved[i]) continue;
+        ++moves;
+        if (!next) continue;
+        const int v = members[i];
+        for (int j = vf_.begin(v); j < vf_.end(v); ++j)
+          for (int k = 0; k < 3; ++k) (*next)[std::size_t(F_(vf_.face(j), k))] = 1;
+      }
+    }
+    return moves;
+  }
+
+  /// Fills ring.a and ring.b for v; false where a corner's A normal turns away from v's (no chart holds them). The
+  /// corners enter the plane along their own A normals, the inverse of the closest-point lift that takes a point
+  /// of the plane back to A.
+  bool chart(int v, Ring& ring) const {
+    ring.origin = labels_.row(v).transpose();
+    const Eigen::Vector3d axis = face_normal(face_of_[std::size_t(v)]).normalized();
+    ring.e1 = axis.unitOrthogonal();
+    ring.e2 = axis.cross(ring.e1);
+    ring.a.clear();
+    ring.b.clear();
+    bool ok = true;
+    auto to_chart = [&](int u) {
+      const Eigen::Vector3d q = labels_.row(u).transpose();
+      const Eigen::Vector3d n = face_normal(face_of_[std::size_t(u)]).normalized();
+      const double along = n.dot(axis);
+      if (!(along > 0.2)) ok = false;
+      const Eigen::Vector3d x = q + ((ring.origin - q).dot(axis) / along) * n - ring.origin;
+      return Eigen::Vector2d(x.dot(ring.e1), x.dot(ring.e2));
+    };
+    for (int j = vf_.begin(v); j < vf_.end(v) && ok; ++j) {
+      const int f = vf_.face(j);
+      int k = 0;
+      while (F_(f, k) != v) ++k;
+      ring.a.push_back(to_chart(F_(f, (k + 1) % 3)));
+      ring.b.push_back(to_chart(F_(f, (k + 2) % 3)));
+    }
+    return ok;
+  }
+
+  void move(int v, const Ring& ring, const Eigen::Vector2d& x) {
+    const SurfaceHit hit =
+        locator_.closest_near(ring.origin + x.x() * ring.e1 + x.y() * ring.e2, face_of_[std::size_t(v)]);
+    labels_.row(v) = hit.point.transpose();
+    face_of_[std::size_t(v)] = hit.face;
+    moved_[std::size_t(v)] = 1;
+  }
+
+  bool untangle_vertex(int v, Ring& ring) {
+    if (!chart(v, ring)) return false;
+    double now = std::numeric_limits<double>::infinity(), largest = 0.0, sum = 0.0;
+    int inverted = 0;
+    for (std::size_t k = 0; k < ring.a.size(); ++k) {
+      const double s = area(ring.a[k], ring.b[k]);
+      now = std::min(now, s);
+      largest = std::max(largest, std::abs(s));
+      sum += s;
+      inverted += s <= 0.0;
+    }
+    // Only a vertex with an inverted or nearly flat triangle (in its chart, or by the exact test of the last
+    // classification: a long triangle can be positive in the chart of one corner) moves; the rest of the map stays
+    // the morph's.
+    bool flagged = false;
+    for (int j = vf_.begin(v); j < vf_.end(v); ++j) flagged = flagged || bad(state_[std::size_t(vf_.face(j))]);
+    if (!flagged && !(now <= options_.flat_fraction * sum / double(ring.a.size()))) return false;
+    Eigen::Vector2d x = Eigen::Vector2d::Zero();
+    const double best = max_min_area(ring, x);
+    if (!(best > now + 1e-9 * largest)) return false;
+    int inverted_after = 0;
+    for (std::size_t k = 0; k < ring.a.size(); ++k) inverted_after += area(ring.a[k] - x, ring.b[k] - x) <= 0.0;
+    if (inverted_after > inverted) return false;
+    move(v, ring, x);
+    return true;
+  }
+
+  /// True when v moved by more than a thousandth of its ring's size (smaller steps are convergence).
+  bool smooth_vertex(int v, Ring& ring) {
+    if (!chart(v, ring)) return false;
+    ring.inverse_shape.clear();
+    ring.shape_det.clear();
+    ring.shape_area.clear();
+    ring.active.clear();
+    double ring_area = 0.0;
+    for (int j = vf_.begin(v); j < vf_.end(v); ++j) {
+      const int f = vf_.face(j);
+      int k = 0;
+      while (F_(f, k) != v) ++k;
+      const Eigen::Vector3d e = scale_ * (V_.row(F_(f, (k + 1) % 3)) - V_.row(v)).transpose();
+      const Eigen::Vector3d g = scale_ * (V_.row(F_(f, (k + 2) % 3)) - V_.row(v)).transpose();
+      const double length = e.norm(), cross = e.cross(g).norm();
+      if (!(length > 0.0) || !(cross > 0.0)) return false;
+      Eigen::Matrix2d P;
+      P << length, e.dot(g) / length, 0.0, cross / length;
+      ring.inverse_shape.push_back(P.inverse());
+      ring.shape_det.push_back(P.determinant());
+      ring.shape_area.push_back(0.5 * cross);
+      const std::size_t i = ring.active.size();
+      // Triangles the untangling could not right are left out, so that their neighbours can still spread.
+      ring.active.push_back(area(ring.a[i], ring.b[i]) > 0.0);
+      ring_area += std::abs(area(ring.a[i], ring.b[i]));
+    }
+    Eigen::Vector2d gradient;
+    double curvature = 0.0;
+    const double now = dirichlet(ring, Eigen::Vector2d::Zero(), &gradient, &curvature);
+    if (!std::isfinite(now) || !(curvature > 0.0)) return false;
+    Eigen::Vector2d step = -gradient / curvature;
+    for (int halving = 0; halving < 20; ++halving, step *= 0.5) {
+      if (!(dirichlet(ring, step, nullptr, nullptr) < now - 1e-4 * gradient.dot(-step))) continue;
+      move(v, ring, step);
+      return step.squaredNorm() > 1e-6 * ring_area / double(ring.a.size());
+    }
+    return false;
+  }
+
+  const Surface& A_;
+  const SurfaceLocator& locator_;
+  const Eigen::MatrixXd& V_;
+  const TriIndices& F_;
+  Eigen::MatrixXd& labels_;
+  const UntangleOptions& options_;
+  const VertexFaces vf_;
+  std::vector<char> state_, wall_, moved_;
+  std::vector<int> face_of_, level_, region_, frontier_;
+  double collapse_area_ = 0.0, scale_ = 1.0;
+};
+
+}  // namespace
+
+UntangleResult untangle_labels(const Surface& A, const SurfaceLocator& locator, const Eigen::MatrixXd& V,
+                               const TriIndices& F, Eigen::MatrixXd& labels, const UntangleOptions& options) {
+  const auto start = std::chrono::steady_clock::now();
+  if (labels.rows() != V.rows() || labels.cols() != 3 || V.cols() != 3)
+    throw InvalidInput("untangle_labels: labels must be #V by 3, one per vertex of B (V #V by 3)");
+  for (Eigen::Index f = 0; f < F.rows(); ++f)
+    for (int k = 0; k < 3; ++k)
+      if (F(f, k) < 0 || F(f, k) >= V.rows())
+        throw InvalidInput("untangle_labels: triangle " + std::to_string(f) + " has a vertex index out of range");
+  UntangleResult result;
+  if (F.rows() > 0) result = Untangler(A, locator, V, F, labels, options).run();
+  result.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+  return result;
+}
+
+}  // namespace morphmap

@@ -1,0 +1,64 @@
+// Fold repair of a label map B -> A (beyond the paper: its §6.3 measures stretch but leaves folds in place). Where
+// the morph sends a patch of B onto A mirrored (the two faces of a thin ear onto one patch of the sphere) or onto a
+// point (characteristics squeezed through one join), the vertices of those triangles and a few rings around them
+// move on A: first each vertex with an inverted or flat triangle to where its smallest triangle (in the tangent
+// plane of A at its label) is largest (local optimisation untangling, Freitag and Plassmann 2000), the region
+// growing while that rights triangles; then the region and a few more rings descend the symmetric Dirichlet energy
+// of their triangles, which keeps every positive triangle positive and spreads the squeezed patches. Where B has
+// handles that the source lacks, some folds are forced (README, Riemann-Hurwitz) and stay.
+#pragma once
+
+#include <Eigen/Core>
+#include <cstdint>
+
+#include "mesh/surface.h"
+#include "mesh/tet_mesh4.h"
+#include "mesh/transfer.h"
+
+namespace morphmap {
+
+struct UntangleOptions {
+  /// Off by default: on sphere -> bunny it costs 0.3-0.4 s (a sixth of the run), on cow -> horse as much, where
+  /// Table II has no time to spare (README, "Fold repair"). Off, the labels are only classified.
+  bool enabled = false;
+  /// Rings of B around the bad triangles' vertices that move with them in the first round; each further round adds
+  /// `grow_rings` rings while bad triangles remain.
+  int rings = 1;
+  int grow_rings = 1;  ///< rings added per round
+  int max_rounds = 8;  ///< rounds of growing the region
+  /// Growing stops after a round that leaves more than (1 - this) times the bad triangles it started with.
+  double min_round_gain = 0.05;
+  int sweeps = 8;  ///< sweeps over the region per round (fewer when one moves nothing)
+  /// A triangle whose labels lie farther apart than this times A's bounding-box diagonal spans a topological seam
+  /// (SeamOptions::label_threshold, the same value): the seam split cuts it, so it is neither repaired nor crossed.
+  double seam_threshold = 0.25;
+  /// A vertex of the region moves only while its smallest triangle (in the chart) is below this fraction of their
+  /// mean area: inverted, collapsed or nearly so.
+  double flat_fraction = 0.05;
+  int smoothing_rings = 4;            ///< rings added to the untangled region for the smoothing
+  int smoothing_sweeps = 150;         ///< sweeps of symmetric Dirichlet descent over the region after the untangling
+  double max_region_fraction = 0.25;  ///< the region stops growing at this fraction of B's vertices
+  double collapse_ratio = 1e-12;      ///< StretchOptions::collapse_ratio: what counts as collapsed
+};
+
+struct UntangleResult {
+  std::int64_t folded_before = 0, collapsed_before = 0;  ///< bad triangles (seam triangles not counted)
+  std::int64_t folded_after = 0, collapsed_after = 0;
+  std::int64_t seam_triangles = 0;   ///< triangles spanning a topological seam, left to the seam split
+  std::int64_t region_vertices = 0;  ///< vertices of the region at the end
+  std::int64_t vertices_moved = 0;   ///< distinct vertices whose label changed
+  std::int64_t moves = 0;            ///< vertex moves, over all sweeps
+  std::int64_t smoothing_moves = 0;  ///< vertex moves of the smoothing, over all sweeps
+  int rounds = 0;                    ///< rounds run
+  int sweeps = 0;                    ///< sweeps run, over all rounds
+  double seconds = 0.0;
+};
+
+/// Repairs folded and collapsed triangles of the map that sends vertex i of B (V #V by 3, F #F by 3, outward) to
+/// labels.row(i) (#V by 3, points of A's surface). `locator` answers closest-point queries on A. Labels of the
+/// repaired patches are replaced in place by points of A. Patches are solved in parallel, each on its own vertices,
+/// so the result does not depend on the thread count.
+UntangleResult untangle_labels(const Surface& A, const SurfaceLocator& locator, const Eigen::MatrixXd& V,
+                               const TriIndices& F, Eigen::MatrixXd& labels, const UntangleOptions& options = {});
+
+}  // namespace morphmap
