@@ -624,28 +624,23 @@ PipelineResult run_pipeline(const PipelineOptions& options) {
   // the labels of B's 4D vertices, so they move with them (a user's mesh has no 4D vertices).
   UntangleResult untangle;
   Eigen::MatrixXd target_seam_labels;  // the 4D labels the target's seam split reads, when the repair moved some
-  {
+  const bool repair = options.untangle.enabled && !closest_point;
+  if (repair) {  // off (the default), not even its classification runs: a closest-point query per triangle
     UntangleOptions untangle_options = options.untangle;
     untangle_options.seam_threshold = options.seams.label_threshold;
-    untangle_options.enabled = untangle_options.enabled && !closest_point;
-    // Off (the default), not even the classification runs: it costs a closest-point query per triangle.
-    const Eigen::MatrixXd before = untangle_options.enabled ? points_of(hits) : Eigen::MatrixXd();
+    const Eigen::MatrixXd before = points_of(hits);
     Eigen::MatrixXd repaired = before;
-    if (untangle_options.enabled)
-      untangle = untangle_labels(A, locator, result.target.V, result.target.F, repaired, untangle_options);
-    if (untangle.vertices_moved > 0) {
-      if (!user_target) target_seam_labels = target_labels_4d.size() > 0 ? target_labels_4d : seam_labels;
-      for (Eigen::Index i = 0; i < repaired.rows(); ++i) {
-        if (repaired.row(i) == before.row(i)) continue;
-        result.target.labels.row(i) = repaired.row(i);
-        hits[std::size_t(i)] = locator.closest(repaired.row(i).transpose());
-        if (!user_target) target_seam_labels.row(result.target.source_edge(i, 0)) = repaired.row(i);
-      }
+    untangle = untangle_labels(A, locator, result.target.V, result.target.F, repaired, untangle_options);
+    if (untangle.vertices_moved > 0 && !user_target)
+      target_seam_labels = target_labels_4d.size() > 0 ? target_labels_4d : seam_labels;
+    for (Eigen::Index i = 0; i < repaired.rows() && untangle.vertices_moved > 0; ++i) {
+      if (repaired.row(i) == before.row(i)) continue;
+      result.target.labels.row(i) = repaired.row(i);
+      hits[std::size_t(i)] = locator.closest(repaired.row(i).transpose());  // its face and weights, for the UVs
+      if (!user_target) target_seam_labels.row(result.target.source_edge(i, 0)) = repaired.row(i);
     }
-    if (untangle_options.enabled) {
-      seconds["repair"] = untangle.seconds;
-      progress.stage("repair", untangle.seconds);
-    }
+    seconds["repair"] = untangle.seconds;
+    progress.stage("repair", untangle.seconds);
   }
 
   start = Clock::now();
@@ -795,7 +790,7 @@ PipelineResult run_pipeline(const PipelineOptions& options) {
       {"min_volume_ratio", quality.min_volume_ratio},
       {"dihedral_histogram_10deg", quality.dihedral_histogram}};
   report["stretch"] = nlohmann::json::parse(stretch_json(stretch));
-  if (options.untangle.enabled && !closest_point)
+  if (repair)
     report["fold_repair"] = {
         {"enabled", true},
         {"folded_before", untangle.folded_before},

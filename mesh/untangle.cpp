@@ -156,13 +156,13 @@ class Untangler {
 
     // The region: the bad triangles' vertices and `rings` rings around them, growing by `grow_rings` a round
     // while rounds right enough triangles.
-    level_.assign(std::size_t(nv), -1);
+    in_region_.assign(std::size_t(nv), 0);
     for (Eigen::Index f = 0; f < nf; ++f)
       if (bad(state_[std::size_t(f)]))
         for (int k = 0; k < 3; ++k) {
           const int v = F_(f, k);
-          if (level_[std::size_t(v)] >= 0 || wall_[std::size_t(v)]) continue;
-          level_[std::size_t(v)] = 0;
+          if (in_region_[std::size_t(v)] || wall_[std::size_t(v)]) continue;
+          in_region_[std::size_t(v)] = 1;
           frontier_.push_back(v);
         }
     region_ = frontier_;
@@ -268,8 +268,8 @@ class Untangler {
           if (state_[std::size_t(f)] == kSeam) continue;
           for (int k = 0; k < 3; ++k) {
             const int u = F_(f, k);
-            if (level_[std::size_t(u)] >= 0 || wall_[std::size_t(u)]) continue;
-            level_[std::size_t(u)] = 1;
+            if (in_region_[std::size_t(u)] || wall_[std::size_t(u)]) continue;
+            in_region_[std::size_t(u)] = 1;
             next.push_back(u);
           }
         }
@@ -438,8 +438,8 @@ class Untangler {
   Eigen::MatrixXd& labels_;
   const UntangleOptions& options_;
   const VertexFaces vf_;
-  std::vector<char> state_, wall_, moved_;
-  std::vector<int> face_of_, level_, region_, frontier_;
+  std::vector<char> state_, wall_, moved_, in_region_;
+  std::vector<int> face_of_, region_, frontier_;
   double collapse_area_ = 0.0, scale_ = 1.0;
 };
 

@@ -18,8 +18,8 @@
 namespace morphmap {
 
 struct UntangleOptions {
-  /// Off by default: on sphere -> bunny it costs 0.3-0.4 s (a sixth of the run), on cow -> horse as much, where
-  /// Table II has no time to spare (README, "Fold repair"). Off, the labels are only classified.
+  /// Off by default: on sphere -> bunny it costs 0.3-0.6 s (a sixth of the run or more), on cow -> horse 0.17-0.40 s,
+  /// where Table II has no time to spare (README, "Fold repair"). Off, the labels are only classified.
   bool enabled = false;
   /// Rings of B around the bad triangles' vertices that move with them in the first round; each further round adds
   /// `grow_rings` rings while bad triangles remain.
@@ -56,8 +56,8 @@ struct UntangleResult {
 
 /// Repairs folded and collapsed triangles of the map that sends vertex i of B (V #V by 3, F #F by 3, outward) to
 /// labels.row(i) (#V by 3, points of A's surface). `locator` answers closest-point queries on A. Labels of the
-/// repaired patches are replaced in place by points of A. Patches are solved in parallel, each on its own vertices,
-/// so the result does not depend on the thread count.
+/// repaired region are replaced in place by points of A. Each sweep moves colour classes of vertices that share no
+/// triangle in parallel, so the result does not depend on the thread count.
 UntangleResult untangle_labels(const Surface& A, const SurfaceLocator& locator, const Eigen::MatrixXd& V,
                                const TriIndices& F, Eigen::MatrixXd& labels, const UntangleOptions& options = {});
 
