@@ -116,6 +116,12 @@ void add_pipeline_options(CLI::App& cmd, PipelineOptions& o) {
          "repaired)")
       ->check(CLI::IsMember({"on", "off"}))
       ->default_str("off");
+  cmd.add_option_function<std::string>(
+         "--thin-features", [&o](const std::string& value) { o.morph.thin.enabled = value == "on"; },
+         "Keep sheets, rods and gaps thinner than a voxel on the lattice: a lattice edge crossing a mesh twice moves "
+         "its end nearer the surface to the other side, so thin parts open no handles (on or off)")
+      ->check(CLI::IsMember({"on", "off"}))
+      ->default_str("on");
   cmd.add_flag("--ply", o.write_ply, "Also write target.ply");
   cmd.add_option("--threads", o.threads, "Worker threads (0 = all cores)")->check(CLI::NonNegativeNumber);
   cmd.add_option_function<std::string>(

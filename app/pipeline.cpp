@@ -763,6 +763,25 @@ PipelineResult run_pipeline(const PipelineOptions& options) {
                       {"exact_distance_queries", morph.exact_queries},
                       {"lattice_dims", {morph.field.dims.x(), morph.field.dims.y(), morph.field.dims.z()}}};
   report["morph"] = {{"method", morph.method}, {"seconds", morph.seconds}};
+  if (morph.method == "distance") {
+    const auto thin = [](const ThinFeatureResult& r) {
+      return nlohmann::json{{"sign_disagreements", r.sign_disagreements},
+                            {"sign_flips", r.sign_flips},
+                            {"grazing_lines", r.grazing_lines},
+                            {"edges_tested", r.edges_tested},
+                            {"thin_edges", r.thin_edges},
+                            {"moved_inside", r.moved_inside},
+                            {"moved_outside", r.moved_outside},
+                            {"groups", r.groups},
+                            {"groups_kept", r.groups_kept},
+                            {"sampled_euler", r.sampled_euler},
+                            {"sampled_components", r.sampled_components},
+                            {"kept_euler", r.kept_euler},
+                            {"kept_components", r.kept_components}};
+    };
+    report["morph"]["thin_features"] = {
+        {"enabled", options.morph.thin.enabled}, {"source", thin(morph.thin_a)}, {"target", thin(morph.thin_b)}};
+  }
   if (morph.method == "vim")
     report["morph"].update({{"samples", options.vim.samples},
                             {"separation", options.vim.separation},

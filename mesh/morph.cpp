@@ -14,9 +14,11 @@
 
 #include <chrono>
 #include <cmath>
+#include <memory>
 #include <mutex>
 
 #include "mesh/errors.h"
+#include "mesh/thin_features.h"
 #include "mesh/transfer.h"
 
 namespace morphmap {
@@ -103,7 +105,8 @@ void sample_distance(const SignedDistance& distance, const MorphField& field, st
 // one voxel of a torus mesh and 14% at two, tests/mesh/morph_test.cpp), but querying every marked point instead was
 // measured and not kept: cow -> horse's L2 p99 rose from 20.6 to 33.7 and its coverage from 1.053 to 1.143, and
 // sphere -> bunny's max stretch from 387 to 1.9e4 at 40 voxels (it fell at 36 and 44).
-std::int64_t fill_exact_distances(const Surface& A, const Surface& B, float clamp, MorphField& field) {
+std::int64_t fill_exact_distances(const Surface& A, const Surface& B, const SurfaceLocator* locators[2], float clamp,
+                                  MorphField& field) {
   const std::vector<std::uint8_t> mark = crossing_corners(field);
   std::int64_t queries = 0;
   for (int which = 0; which < 2; ++which) {
@@ -119,8 +122,7 @@ std::int64_t fill_exact_distances(const Surface& A, const Surface& B, float clam
       const std::int64_t q = todo[r];
       points.row(Eigen::Index(r)) = field.point(int(q % nx), int((q / nx) % ny), int(q / (nx * ny))).transpose();
     }
-    const SurfaceLocator locator(which == 0 ? A : B);
-    const std::vector<SurfaceHit> hits = locator.closest_all(points);
+    const std::vector<SurfaceHit> hits = locators[which]->closest_all(points);
     for (std::size_t r = 0; r < todo.size(); ++r) {
       float& v = values[std::size_t(todo[r])];
       v = std::copysign(float(hits[r].distance), v);
@@ -186,7 +188,22 @@ MorphResult build_morph(const Surface& A, const Surface& B, const MorphOptions& 
     }
   }
   result.lattice_points = std::int64_t(field.dims.x()) * field.dims.y() * field.dims.z();
-  result.exact_queries = fill_exact_distances(A, B, band * float(h), field);
+  std::unique_ptr<SurfaceLocator> owned[2];
+  const SurfaceLocator* locators[2] = {nullptr, nullptr};
+  for (int which = 0; which < 2; ++which)
+    if (!(which == 0 ? A : B).signed_distance) {
+      owned[which] = std::make_unique<SurfaceLocator>(which == 0 ? A : B);
+      locators[which] = owned[which].get();
+    }
+  result.exact_queries = fill_exact_distances(A, B, locators, band * float(h), field);
+  // After the exact distances: thin parts lie within a voxel of the surface, inside the band either way.
+  for (int which = 0; which < 2; ++which) {
+    if (locators[which] == nullptr) continue;
+    const SurfaceCheck check = check_surface((which == 0 ? A : B).F, (which == 0 ? A : B).V.rows());
+    const LatticeTopology target{check.euler(), check.components};
+    (which == 0 ? result.thin_a : result.thin_b) =
+        keep_thin_features(*locators[which], field, which == 0 ? field.dA : field.dB, target, options.thin);
+  }
   result.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
   return result;
 }

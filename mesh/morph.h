@@ -13,12 +13,33 @@
 
 namespace morphmap {
 
+/// Thin parts kept on the lattice (mesh/thin_features.h).
+struct ThinFeatureOptions {
+  bool enabled = true;  ///< off: the samples are left as they are (thin parts may open handles or split off)
+};
+
+struct ThinFeatureResult {
+  std::int64_t sign_disagreements = 0;  ///< lattice points whose sign the surface's winding number contradicts
+  std::int64_t sign_flips = 0;          ///< of those, points given the winding's sign (kept groups)
+  std::int64_t grazing_lines = 0;       ///< lattice lines with an odd number of crossings (left out of the vote)
+  std::int64_t edges_tested = 0;   ///< Kuhn edges close enough to the surface to hide two crossings (|d_a| + |d_b| <
+                                   ///< their length), each cast against the surface
+  std::int64_t thin_edges = 0;     ///< of those, edges with ends of one sign crossing the surface twice or more
+  std::int64_t moved_inside = 0;   ///< points moved inside (kept groups): an edge from them crosses a thin solid part
+  std::int64_t moved_outside = 0;  ///< points moved outside (kept groups): an edge from them crosses a thin gap
+  std::int64_t groups = 0;         ///< groups of candidate points (joined by Kuhn edges), each kept or not as a whole
+  std::int64_t groups_kept = 0;    ///< groups that brought the zero set's topology nearer the surface's
+  /// The zero set's Euler characteristic and components as sampled (OpenVDB's signs) and as kept.
+  std::int64_t sampled_euler = 0, sampled_components = 0, kept_euler = 0, kept_components = 0;
+};
+
 struct MorphOptions {
   int voxels = 40;          ///< lattice voxels across the larger side of the union bounding box (demo: 2.4M tets, 10 s)
   double voxel_size = 0.0;  ///< explicit voxel size h; overrides `voxels` when > 0
   int padding = 2;          ///< voxels of margin around the union bounding box (d > 0 there)
   double band = 3.0;        ///< OpenVDB narrow-band half width in voxels; its values are kept inside it (within a few
                             ///< percent of a voxel of exact) and exact distances are filled in beyond it
+  ThinFeatureOptions thin;  ///< sheets, rods and gaps thinner than a voxel kept on the lattice (meshes only)
 };
 
 /// Signed distances of A and B (negative inside) on the lattice points origin + h * (i, j, k).
@@ -51,11 +72,12 @@ struct MorphResult {
   MorphField field;
   double seconds = 0.0;  ///< wall time of the stage
   std::int64_t lattice_points = 0;
-  std::int64_t exact_queries = 0;   ///< closest-point queries made beyond the narrow band
-  std::string method = "distance";  ///< "distance" (build_morph) or "vim" (build_vim_morph)
-  std::int64_t rbf_centres = 0;     ///< vim: basis functions of the 4D implicit function
-  double fit_residual = 0.0;        ///< vim: largest |G(c_i) - f_i| over the constraints, in length units
-  double fit_seconds = 0.0;         ///< vim: sampling, constraint system and its solve (the rest is evaluation)
+  std::int64_t exact_queries = 0;    ///< closest-point queries made beyond the narrow band
+  std::string method = "distance";   ///< "distance" (build_morph) or "vim" (build_vim_morph)
+  ThinFeatureResult thin_a, thin_b;  ///< thin parts of A and B put back on the lattice (distance morph of meshes)
+  std::int64_t rbf_centres = 0;      ///< vim: basis functions of the 4D implicit function
+  double fit_residual = 0.0;         ///< vim: largest |G(c_i) - f_i| over the constraints, in length units
+  double fit_seconds = 0.0;          ///< vim: sampling, constraint system and its solve (the rest is evaluation)
 };
 
 /// The lattice of a morph between A and B: origin, voxel size, extent and dims as build_morph chooses them (the

@@ -14,6 +14,8 @@
 #include <cmath>
 #include <limits>
 #include <string>
+#include <utility>
+#include <vector>
 
 #include "mesh/errors.h"
 
@@ -345,6 +347,83 @@ std::vector<SurfaceHit> SurfaceLocator::closest_all(const Eigen::MatrixXd& Q) co
       hint = hits[std::size_t(i)].face;
     }
   });
+  return hits;
+}
+
+namespace {
+
+// Parameter t in [0, 1] where the segment a + t (b - a) meets the triangle, or -1 (Moller and Trumbore 1997). Only
+// for the scan of surfaces too large for Embree's float frame.
+double segment_hit(const Eigen::Vector3d& a, const Eigen::Vector3d& b, const Corners& tri) {
+  const Eigen::Vector3d dir = b - a;
+  const Eigen::Vector3d e1 = tri.p[1] - tri.p[0], e2 = tri.p[2] - tri.p[0];
+  const Eigen::Vector3d p = dir.cross(e2);
+  const double det = e1.dot(p);
+  if (det == 0.0) return -1.0;
+  const Eigen::Vector3d s = a - tri.p[0];
+  const double u = s.dot(p) / det;
+  if (u < 0.0 || u > 1.0) return -1.0;
+  const Eigen::Vector3d q = s.cross(e1);
+  const double v = dir.dot(q) / det;
+  if (v < 0.0 || u + v > 1.0) return -1.0;
+  const double t = e2.dot(q) / det;
+  return t >= 0.0 && t <= 1.0 ? t : -1.0;
+}
+
+}  // namespace
+
+std::vector<double> SurfaceLocator::crossings(const Eigen::Vector3d& a, const Eigen::Vector3d& b, int limit,
+                                              double separation, std::vector<int>* directions) const {
+  if (!a.allFinite() || !b.allFinite()) throw InvalidInput("SurfaceLocator::crossings: non-finite segment");
+  const Impl& m = *impl_;
+  const Eigen::Vector3d la = a - m.shift, lb = b - m.shift;
+  std::vector<double> hits;
+  if (directions != nullptr) directions->clear();
+  const auto direction = [&](std::size_t face) {
+    const Corners& t = m.faces[face];
+    return (b - a).dot((t.p[1] - t.p[0]).cross(t.p[2] - t.p[0])) >= 0.0 ? 1 : -1;
+  };
+  if (m.scene != nullptr && la.cwiseAbs().maxCoeff() < kFloatReach && lb.cwiseAbs().maxCoeff() < kFloatReach) {
+    // Embree returns the nearest hit past tnear: cast again from just past each one.
+    float from = 0.0f;
+    while (int(hits.size()) < limit && from <= 1.0f) {
+      RTCRayHit ray;
+      ray.ray.org_x = float(la.x());
+      ray.ray.org_y = float(la.y());
+      ray.ray.org_z = float(la.z());
+      ray.ray.dir_x = float(lb.x() - la.x());
+      ray.ray.dir_y = float(lb.y() - la.y());
+      ray.ray.dir_z = float(lb.z() - la.z());
+      ray.ray.tnear = from;
+      ray.ray.tfar = 1.0f;
+      ray.ray.time = 0.0f;
+      ray.ray.mask = 0xFFFFFFFFu;
+      ray.ray.id = 0;
+      ray.ray.flags = 0;
+      ray.hit.geomID = RTC_INVALID_GEOMETRY_ID;
+      ray.hit.instID[0] = RTC_INVALID_GEOMETRY_ID;
+      RTCIntersectContext context;
+      rtcInitIntersectContext(&context);
+      rtcIntersect1(m.scene, &context, &ray);
+      if (embree_error != RTC_ERROR_NONE) throw_if_embree_failed("SurfaceLocator::crossings: rtcIntersect1", m.device);
+      if (ray.hit.geomID == RTC_INVALID_GEOMETRY_ID) break;
+      hits.push_back(double(ray.ray.tfar));
+      if (directions != nullptr) directions->push_back(direction(ray.hit.primID));
+      from = std::nextafter(float(double(ray.ray.tfar) + separation), 2.0f);
+    }
+    return hits;
+  }
+  std::vector<std::pair<double, std::size_t>> all;
+  for (std::size_t f = 0; f < m.faces.size(); ++f) {
+    const double t = segment_hit(a, b, m.faces[f]);
+    if (t >= 0.0) all.emplace_back(t, f);
+  }
+  std::sort(all.begin(), all.end());
+  for (const auto& [t, f] : all)
+    if (int(hits.size()) < limit && (hits.empty() || t > hits.back() + separation)) {
+      hits.push_back(t);
+      if (directions != nullptr) directions->push_back(direction(f));
+    }
   return hits;
 }
 

@@ -38,6 +38,12 @@ class SurfaceLocator {
   SurfaceHit closest_near(const Eigen::Vector3d& query, int hint) const;
   /// One hit per row of Q (#Q by 3), TBB-parallel, order preserved; each query hinted by the previous one's face.
   std::vector<SurfaceHit> closest_all(const Eigen::MatrixXd& Q) const;
+  /// Where the segment from a to b crosses the surface: the parameters t in [0, 1] of a + t (b - a), ascending, at
+  /// most `limit` of them. Hits closer together than `separation` (in t) count once: a segment through a shared
+  /// edge or vertex meets two or more faces there. With `directions`, also whether the segment leaves (+1: along the
+  /// face's normal, (p1 - p0) x (p2 - p0)) or enters (-1) the surface at each.
+  std::vector<double> crossings(const Eigen::Vector3d& a, const Eigen::Vector3d& b, int limit, double separation = 1e-4,
+                                std::vector<int>* directions = nullptr) const;
 
  private:
   struct Impl;
