@@ -35,6 +35,28 @@ void BM_Morph(benchmark::State& state, const std::string& method) {
   state.counters["fit_seconds"] = result.fit_seconds;
 }
 
+// The distance-field morph of cow -> horse at Table II's 63 voxels with the meshes' topology kept on the lattice
+// (Arg 1, the default) or not (Arg 0): the cost of mesh/thin_features.h, counted in the morph stage.
+void BM_MorphThinFeatures(benchmark::State& state) {
+  morphmap::Surface A, B;
+  const std::string error = bench::case_surfaces("cow-horse", A, B);
+  if (!error.empty()) {
+    state.SkipWithError(error.c_str());
+    return;
+  }
+  morphmap::MorphOptions lattice;
+  lattice.voxels = 63;
+  lattice.thin.enabled = state.range(0) != 0;
+  morphmap::MorphResult result;
+  for (auto _ : state) {
+    result = morphmap::build_morph(A, B, lattice);
+    benchmark::DoNotOptimize(result.field.dA.data());
+  }
+  state.counters["groups"] = double(result.thin_a.groups + result.thin_b.groups);
+  state.counters["sign_flips"] = double(result.thin_a.sign_flips + result.thin_b.sign_flips);
+}
+
+BENCHMARK(BM_MorphThinFeatures)->Arg(0)->Arg(1)->Unit(benchmark::kMillisecond)->UseRealTime();
 BENCHMARK_CAPTURE(BM_Morph, distance, std::string("distance"))->Arg(0)->Unit(benchmark::kMillisecond)->UseRealTime();
 BENCHMARK_CAPTURE(BM_Morph, vim, std::string("vim"))->Arg(600)->Arg(1000)->Unit(benchmark::kMillisecond)->UseRealTime();
 

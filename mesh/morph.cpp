@@ -11,6 +11,7 @@
 #include <openvdb/tools/MeshToVolume.h>
 #include <tbb/blocked_range.h>
 #include <tbb/parallel_for.h>
+#include <tbb/parallel_invoke.h>
 
 #include <chrono>
 #include <cmath>
@@ -197,13 +198,15 @@ MorphResult build_morph(const Surface& A, const Surface& B, const MorphOptions& 
     }
   result.exact_queries = fill_exact_distances(A, B, locators, band * float(h), field);
   // After the exact distances: thin parts lie within a voxel of the surface, inside the band either way.
-  for (int which = 0; which < 2; ++which) {
-    if (locators[which] == nullptr) continue;
+  // A and B side by side: much of the work (the topology counts) is sequential, and the two are independent.
+  const auto keep = [&](int which) {
+    if (locators[which] == nullptr) return;
     const SurfaceCheck check = check_surface((which == 0 ? A : B).F, (which == 0 ? A : B).V.rows());
     const LatticeTopology target{check.euler(), check.components};
     (which == 0 ? result.thin_a : result.thin_b) =
         keep_thin_features(*locators[which], field, which == 0 ? field.dA : field.dB, target, options.thin);
-  }
+  };
+  tbb::parallel_invoke([&] { keep(0); }, [&] { keep(1); });
   result.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
   return result;
 }

@@ -313,6 +313,7 @@ std::int64_t distance_from(const LatticeTopology& a, const LatticeTopology& b) {
 
 struct GroupOutcome {
   std::int64_t groups = 0, kept = 0, moved_inside = 0, moved_outside = 0;
+  LatticeTopology initial;   ///< the zero set's, before any group
   LatticeTopology topology;  ///< the zero set's, after the kept groups
 };
 
@@ -347,7 +348,7 @@ GroupOutcome flip_groups(const MorphField& field, std::vector<float>& values, co
   }
   outcome.groups = std::int64_t(members.size());
   const CandidateTopology topology(field, values, points);
-  outcome.topology = topology.evaluate();
+  outcome.initial = outcome.topology = topology.evaluate();
   std::vector<float> before;
   for (const auto& group : members) {
     before.clear();
@@ -380,9 +381,6 @@ ThinFeatureResult keep_thin_features(const SurfaceLocator& locator, const MorphF
   if (!options.enabled || n.minCoeff() < 2) return result;
   const double h = field.voxel_size;
 
-  const LatticeTopology sampled = lattice_topology(field, values);
-  result.sampled_euler = sampled.euler;
-  result.sampled_components = sampled.components;
   std::vector<std::uint8_t> inside(values.size(), 0), votes(values.size(), 0);
   result.grazing_lines = vote_by_winding(locator, field, inside, votes);
   std::vector<std::int64_t> wrong;
@@ -395,7 +393,14 @@ ThinFeatureResult keep_thin_features(const SurfaceLocator& locator, const MorphF
   // A right sign can still open a handle (points inside a part thinner than a voxel that no Kuhn edge joins), so
   // these too go in groups, kept unless they take the topology further from the surface's.
   const GroupOutcome signs = flip_groups(field, values, wrong, target, true);
+  result.sampled_euler = signs.initial.euler;
+  result.sampled_components = signs.initial.components;
   result.sign_flips = signs.moved_inside + signs.moved_outside;
+  if (distance_from(signs.topology, target) == 0) {  // no group of thin parts could be kept
+    result.kept_euler = signs.topology.euler;
+    result.kept_components = signs.topology.components;
+    return result;
+  }
 
   // Thin edges. Pass 1: per lattice point and direction, whether its forward edge is thin (each edge written by its
   // lower end only). Pass 2: each point reads its 14 edges. No two tasks write one byte, and no order matters.
