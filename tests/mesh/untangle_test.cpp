@@ -78,6 +78,47 @@ TEST(Untangle, RightsACollapseAndAFoldOfTheIdentity) {
   for (const SurfaceHit& hit : hits) EXPECT_LT(hit.distance, 1e-9);
 }
 
+// The identity map with a disk of labels (about five rings) mirrored across a plane through its centre: every
+// triangle inside folds, and those across the mirror's rim jump far enough to count as seam triangles; more than
+// moving one vertex at a time can right.
+Eigen::MatrixXd mirrored_disk(const Surface& A) {
+  Eigen::MatrixXd labels = A.V;
+  const double h = mean_edge(A);
+  const Eigen::Vector3d c = Eigen::Vector3d(1.0, 0.2, 0.1).normalized();
+  const Eigen::Vector3d u = c.cross(Eigen::Vector3d::UnitZ()).normalized();
+  for (Eigen::Index i = 0; i < A.V.rows(); ++i) {
+    const Eigen::Vector3d p = A.V.row(i).transpose();
+    if ((p - c).norm() > 5.0 * h) continue;
+    labels.row(i) = (p - 2.0 * (p - c).dot(u) * u).normalized().transpose();
+  }
+  return labels;
+}
+
+TEST(Untangle, PatchRebuildRightsAMirroredDisk) {
+  // Finer than unit_sphere(), so that the mirrored labels jump less than the seam threshold.
+  const Surface A = make_shape(parse_shape_spec("sphere:size=1,center=0/0/0,res=48"), std::nullopt);
+  const SurfaceLocator locator(A);
+  const Eigen::MatrixXd damaged = mirrored_disk(A);
+  const StretchResult before = measure_stretch(A, A.V, A.F, damaged);
+  ASSERT_GE(before.folded, 12);
+  Eigen::MatrixXd labels = damaged;
+  const UntangleResult r = untangle_labels(A, locator, A.V, A.F, labels, enabled());
+  EXPECT_GT(r.seam_triangles, 0);
+  EXPECT_GE(r.patches_rebuilt, 1);
+  EXPECT_GT(r.patch_vertices, 0);
+  EXPECT_EQ(r.folded_after, 0);
+  EXPECT_EQ(r.collapsed_after, 0);
+  const StretchResult after = measure_stretch(A, A.V, A.F, labels);
+  EXPECT_EQ(after.folded, 0);
+  EXPECT_NEAR(after.coverage, 1.0, 0.02);
+  EXPECT_LT(after.max_sigma1, 5.0);
+  // Moving one vertex at a time alone leaves folds.
+  UntangleOptions local = enabled();
+  local.rebuild_patches = false;
+  Eigen::MatrixXd only_local = damaged;
+  EXPECT_GT(untangle_labels(A, locator, A.V, A.F, only_local, local).folded_after, 0);
+}
+
 TEST(Untangle, LeavesAGoodMapAlone) {
   const Surface A = unit_sphere();
   const SurfaceLocator locator(A);
