@@ -10,6 +10,7 @@
 
 #include "bench/bench_cases.h"
 #include "mesh/morph.h"
+#include "mesh/thin_features.h"
 #include "mesh/vim.h"
 
 namespace {
@@ -57,6 +58,33 @@ void BM_MorphThinFeatures(benchmark::State& state) {
 }
 
 BENCHMARK(BM_MorphThinFeatures)->Arg(0)->Arg(1)->Unit(benchmark::kMillisecond)->UseRealTime();
+
+// keep_thin_features alone on cow -> horse's samples at 63 voxels (both surfaces, one after the other): the part of
+// BM_MorphThinFeatures/1 that /0 does not have, without the noise of the rest of the morph.
+void BM_KeepThinFeatures(benchmark::State& state) {
+  morphmap::Surface A, B;
+  const std::string error = bench::case_surfaces("cow-horse", A, B);
+  if (!error.empty()) {
+    state.SkipWithError(error.c_str());
+    return;
+  }
+  morphmap::MorphOptions lattice;
+  lattice.voxels = 63;
+  lattice.thin.enabled = false;
+  const morphmap::MorphResult sampled = morphmap::build_morph(A, B, lattice);
+  const morphmap::SurfaceLocator locator_a(A), locator_b(B);
+  const morphmap::SurfaceCheck check_a = morphmap::check_surface(A.F, A.V.rows());
+  const morphmap::SurfaceCheck check_b = morphmap::check_surface(B.F, B.V.rows());
+  for (auto _ : state) {
+    std::vector<float> a = sampled.field.dA, b = sampled.field.dB;
+    morphmap::keep_thin_features(locator_a, sampled.field, a, {check_a.euler(), check_a.components});
+    morphmap::keep_thin_features(locator_b, sampled.field, b, {check_b.euler(), check_b.components});
+    benchmark::DoNotOptimize(a.data());
+    benchmark::DoNotOptimize(b.data());
+  }
+}
+
+BENCHMARK(BM_KeepThinFeatures)->Unit(benchmark::kMillisecond)->UseRealTime();
 BENCHMARK_CAPTURE(BM_Morph, distance, std::string("distance"))->Arg(0)->Unit(benchmark::kMillisecond)->UseRealTime();
 BENCHMARK_CAPTURE(BM_Morph, vim, std::string("vim"))->Arg(600)->Arg(1000)->Unit(benchmark::kMillisecond)->UseRealTime();
 

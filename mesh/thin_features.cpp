@@ -163,24 +163,39 @@ void for_each_crossed_cube(const MorphField& field, const std::vector<float>& va
   });
 }
 
-// Regions of one sign joined by Kuhn edges, over the points not `excluded` (may be empty).
+// Regions of one sign joined by Kuhn edges, over the points not `excluded` (may be empty). Slabs of k are joined in
+// parallel (every index a slab's joins and finds touch lies in the slab), then the edges between slabs in order; the
+// partition does not depend on that order, and each region's root is its smallest index either way.
 Components sign_regions(const MorphField& field, const std::vector<float>& values,
                         const std::vector<std::uint8_t>& excluded, const KuhnStar& star) {
   const Eigen::Vector3i& n = field.dims;
   Components parts(values.size());
-  for (int k = 0; k < n.z(); ++k)
+  const auto join_edges = [&](int i, int j, int k, bool within, int k_end) {
+    const std::int64_t q = field.index(i, j, k);
+    if (!excluded.empty() && excluded[std::size_t(q)]) return;
+    const bool in = values[std::size_t(q)] < 0.0f;
+    for (std::size_t e = 0; e < kEdges.size(); ++e) {
+      const int ok = k + kEdges[e][2];
+      if (i + kEdges[e][0] >= n.x() || j + kEdges[e][1] >= n.y() || ok >= n.z()) continue;
+      if ((ok < k_end) != within) continue;
+      const std::int64_t o = q + star.edge[e];
+      if ((excluded.empty() || !excluded[std::size_t(o)]) && (values[std::size_t(o)] < 0.0f) == in) parts.join(q, o);
+    }
+  };
+  constexpr int kSlabs = 16;
+  const int depth = std::max(1, (n.z() + kSlabs - 1) / kSlabs);
+  tbb::parallel_for(0, kSlabs, [&](int slab) {
+    const int k_end = std::min(n.z(), (slab + 1) * depth);
+    for (int k = slab * depth; k < k_end; ++k)
+      for (int j = 0; j < n.y(); ++j)
+        for (int i = 0; i < n.x(); ++i) join_edges(i, j, k, true, k_end);
+  });
+  for (int slab = 0; slab < kSlabs; ++slab) {
+    const int k_end = std::min(n.z(), (slab + 1) * depth);
+    if (k_end <= slab * depth) continue;
     for (int j = 0; j < n.y(); ++j)
-      for (int i = 0; i < n.x(); ++i) {
-        const std::int64_t q = field.index(i, j, k);
-        if (!excluded.empty() && excluded[std::size_t(q)]) continue;
-        const bool in = values[std::size_t(q)] < 0.0f;
-        for (std::size_t e = 0; e < kEdges.size(); ++e) {
-          if (i + kEdges[e][0] >= n.x() || j + kEdges[e][1] >= n.y() || k + kEdges[e][2] >= n.z()) continue;
-          const std::int64_t o = q + star.edge[e];
-          if ((excluded.empty() || !excluded[std::size_t(o)]) && (values[std::size_t(o)] < 0.0f) == in)
-            parts.join(q, o);
-        }
-      }
+      for (int i = 0; i < n.x(); ++i) join_edges(i, j, k_end - 1, false, k_end);
+  }
   return parts;
 }
 
@@ -402,48 +417,36 @@ ThinFeatureResult keep_thin_features(const SurfaceLocator& locator, const MorphF
     return result;
   }
 
-  // Thin edges. Pass 1: per lattice point and direction, whether its forward edge is thin (each edge written by its
-  // lower end only). Pass 2: each point reads its 14 edges. No two tasks write one byte, and no order matters.
-  std::vector<std::uint8_t> thin(values.size() * kEdges.size(), 0);
+  // Thin edges, found per k slab (each point casts its forward edges) and gathered in slab order: of each, the end
+  // nearer the surface is a candidate. A point farther than the longest edge from the surface has none.
+  const double reach = h * std::sqrt(3.0);
+  std::vector<std::vector<std::int64_t>> nearer(std::size_t(n.z()));
   std::vector<std::int64_t> tested(std::size_t(n.z()), 0);
   for_each_point(field, [&](int i, int j, int k, std::int64_t a) {
     const float va = values[std::size_t(a)];
+    if (!(double(std::abs(va)) < reach)) return;
     for (std::size_t e = 0; e < kEdges.size(); ++e) {
       const int bi = i + kEdges[e][0], bj = j + kEdges[e][1], bk = k + kEdges[e][2];
       if (bi >= n.x() || bj >= n.y() || bk >= n.z()) continue;
-      const float vb = values[std::size_t(field.index(bi, bj, bk))];
+      const std::int64_t b = field.index(bi, bj, bk);
+      const float vb = values[std::size_t(b)];
       if ((va < 0.0f) != (vb < 0.0f)) continue;
       // Two crossings at s1 < s2 along an edge of length l put its ends within s1 and l - s2 of the surface.
       const double length = h * std::sqrt(double(kEdges[e][0] + kEdges[e][1] + kEdges[e][2]));
       if (double(std::abs(va)) + double(std::abs(vb)) >= length) continue;
       ++tested[std::size_t(k)];
-      if (locator.crossings(field.point(i, j, k), field.point(bi, bj, bk), 2).size() >= 2)
-        thin[std::size_t(a) * kEdges.size() + e] = 1;
+      if (locator.crossings(field.point(i, j, k), field.point(bi, bj, bk), 2).size() < 2) continue;
+      nearer[std::size_t(k)].push_back(std::abs(va) <= std::abs(vb) ? a : b);  // a < b: the lower index on a tie
     }
   });
-  for (const std::int64_t t : tested) result.edges_tested += t;
-  std::vector<std::uint8_t> candidate(values.size(), 0);
-  std::vector<std::int64_t> edges(std::size_t(n.z()), 0);
-  for_each_point(field, [&](int i, int j, int k, std::int64_t q) {
-    const float vq = values[std::size_t(q)];
-    bool move = false;
-    for (std::size_t e = 0; e < kEdges.size(); ++e)
-      for (const int s : {1, -1}) {  // 1: the edge from q forwards (q writes it), -1: the edge ending at q
-        const int oi = i + s * kEdges[e][0], oj = j + s * kEdges[e][1], ok = k + s * kEdges[e][2];
-        if (oi < 0 || oj < 0 || ok < 0 || oi >= n.x() || oj >= n.y() || ok >= n.z()) continue;
-        const std::int64_t o = field.index(oi, oj, ok);
-        if (!thin[std::size_t(s == 1 ? q : o) * kEdges.size() + e]) continue;
-        if (s == 1) ++edges[std::size_t(k)];
-        const float vo = values[std::size_t(o)];
-        move |= std::abs(vq) < std::abs(vo) || (std::abs(vq) == std::abs(vo) && q < o);
-      }
-    candidate[std::size_t(q)] = move;
-  });
-  for (const std::int64_t e : edges) result.thin_edges += e;
-
   std::vector<std::int64_t> points;
-  for (std::size_t q = 0; q < values.size(); ++q)
-    if (candidate[q]) points.push_back(std::int64_t(q));
+  for (int k = 0; k < n.z(); ++k) {
+    result.edges_tested += tested[std::size_t(k)];
+    result.thin_edges += std::int64_t(nearer[std::size_t(k)].size());
+    points.insert(points.end(), nearer[std::size_t(k)].begin(), nearer[std::size_t(k)].end());
+  }
+  std::sort(points.begin(), points.end());
+  points.erase(std::unique(points.begin(), points.end()), points.end());
   const GroupOutcome thin_parts = flip_groups(field, values, points, target, false);
   result.groups = thin_parts.groups;
   result.groups_kept = thin_parts.kept;
