@@ -36,17 +36,20 @@ void BM_Morph(benchmark::State& state, const std::string& method) {
   state.counters["fit_seconds"] = result.fit_seconds;
 }
 
+// cow -> horse's surfaces and Table II's 63 voxels; false (the benchmark skipped) when a model is missing.
+bool cow_horse(benchmark::State& state, morphmap::Surface& A, morphmap::Surface& B, morphmap::MorphOptions& lattice) {
+  const std::string error = bench::case_surfaces("cow-horse", A, B);
+  if (!error.empty()) state.SkipWithError(error.c_str());
+  lattice.voxels = 63;
+  return error.empty();
+}
+
 // The distance-field morph of cow -> horse at Table II's 63 voxels with the meshes' topology kept on the lattice
 // (Arg 1, the default) or not (Arg 0): the cost of mesh/thin_features.h, counted in the morph stage.
 void BM_MorphThinFeatures(benchmark::State& state) {
   morphmap::Surface A, B;
-  const std::string error = bench::case_surfaces("cow-horse", A, B);
-  if (!error.empty()) {
-    state.SkipWithError(error.c_str());
-    return;
-  }
   morphmap::MorphOptions lattice;
-  lattice.voxels = 63;
+  if (!cow_horse(state, A, B, lattice)) return;
   lattice.thin.enabled = state.range(0) != 0;
   morphmap::MorphResult result;
   for (auto _ : state) {
@@ -63,13 +66,8 @@ BENCHMARK(BM_MorphThinFeatures)->Arg(0)->Arg(1)->Unit(benchmark::kMillisecond)->
 // BM_MorphThinFeatures/1 that /0 does not have, without the noise of the rest of the morph.
 void BM_KeepThinFeatures(benchmark::State& state) {
   morphmap::Surface A, B;
-  const std::string error = bench::case_surfaces("cow-horse", A, B);
-  if (!error.empty()) {
-    state.SkipWithError(error.c_str());
-    return;
-  }
   morphmap::MorphOptions lattice;
-  lattice.voxels = 63;
+  if (!cow_horse(state, A, B, lattice)) return;
   lattice.thin.enabled = false;
   const morphmap::MorphResult sampled = morphmap::build_morph(A, B, lattice);
   const morphmap::SurfaceLocator locator_a(A), locator_b(B);
