@@ -441,6 +441,15 @@ class Untangler {
     Eigen::Vector2d step = -gradient / curvature;
     for (int halving = 0; halving < 20; ++halving, step *= 0.5) {
       if (!(dirichlet(ring, step, nullptr, nullptr) < now - 1e-4 * gradient.dot(-step))) continue;
+      // A triangle left out of the energy (not positive) must not become a sliver: positive but far below its
+      // ring's mean, where it would count as a triangle of extreme stretch instead of a collapsed one.
+      bool sliver = false;
+      for (std::size_t k = 0; k < ring.a.size() && !sliver; ++k) {
+        if (ring.active[k]) continue;
+        const double after = area(ring.a[k] - step, ring.b[k] - step);
+        sliver = after > 0.0 && after < options_.flat_fraction * ring_area / double(ring.a.size());
+      }
+      if (sliver) continue;
       move(v, ring, step);
       return step.squaredNorm() > 1e-6 * ring_area / double(ring.a.size());
     }

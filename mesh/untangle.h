@@ -46,7 +46,7 @@ struct UntangleOptions {
   /// value weights of B's own shape (a Tutte embedding, one sparse solve), and the layout is kept when it rights
   /// enough of the patch's bad triangles without squeezing any (below); otherwise the patch doubles its rings, up
   /// to `max_patch_rings`. Measured on sphere -> bunny at 40 voxels (with --thin-features): max stretch 1.2e9 ->
-  /// 33, variance 4e12 -> 0.086, folded 88 -> 60 (README, "Fold repair").
+  /// 33, variance 4e12 -> 0.086, folded 88 -> 60 (63 with the smoothing's sliver guard; README, "Fold repair").
   bool rebuild_patches = true;
   int patch_rings = 2;
   int max_patch_rings = 8;
