@@ -370,9 +370,10 @@ PipelineResult run_pipeline(const PipelineOptions& options) {
                          std::to_string(options.vim.samples) + " samples per surface), over the limit of " +
                          gib(double(options.max_memory_bytes)) + "; lower --vim-samples");
   }
+  const SurfaceCheck input_checks[2] = {input_check_a, input_check_b};  // the topology the thin features keep
   const MorphResult morph = options.morph_method == "vim"
                                 ? build_vim_morph(A, B, options.morph, options.vim, options.extract.time_steps)
-                                : build_morph(A, B, options.morph);
+                                : build_morph(A, B, options.morph, input_checks);
   seconds["morph"] = morph.seconds;
   progress.stage("morph", morph.seconds);
 

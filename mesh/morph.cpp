@@ -163,7 +163,7 @@ MorphField morph_lattice(const Surface& A, const Surface& B, const MorphOptions&
   return field;
 }
 
-MorphResult build_morph(const Surface& A, const Surface& B, const MorphOptions& options) {
+MorphResult build_morph(const Surface& A, const Surface& B, const MorphOptions& options, const SurfaceCheck* checks) {
   const auto start = std::chrono::steady_clock::now();
   static std::once_flag vdb_init;
   std::call_once(vdb_init, [] { openvdb::initialize(); });
@@ -201,7 +201,8 @@ MorphResult build_morph(const Surface& A, const Surface& B, const MorphOptions& 
   // A and B side by side: much of the work (the topology counts) is sequential, and the two are independent.
   const auto keep = [&](int which) {
     if (locators[which] == nullptr) return;
-    const SurfaceCheck check = check_surface((which == 0 ? A : B).F, (which == 0 ? A : B).V.rows());
+    const Surface& surface = which == 0 ? A : B;
+    const SurfaceCheck check = checks != nullptr ? checks[which] : check_surface(surface.F, surface.V.rows());
     const LatticeTopology target{check.euler(), check.components};
     (which == 0 ? result.thin_a : result.thin_b) =
         keep_thin_features(*locators[which], field, which == 0 ? field.dA : field.dB, target, options.thin);

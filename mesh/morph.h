@@ -21,7 +21,7 @@ struct ThinFeatureOptions {
 struct ThinFeatureResult {
   std::int64_t sign_disagreements = 0;  ///< lattice points whose sign the surface's winding number contradicts
   std::int64_t sign_flips = 0;          ///< of those, points given the winding's sign (kept groups)
-  std::int64_t grazing_lines = 0;       ///< lattice lines with an odd number of crossings (left out of the vote)
+  std::int64_t grazing_lines = 0;       ///< lattice lines whose crossings' directions do not sum to zero (no vote)
   std::int64_t edges_tested = 0;   ///< Kuhn edges close enough to the surface to hide two crossings (|d_a| + |d_b| <
                                    ///< their length), each cast against the surface
   std::int64_t thin_edges = 0;     ///< of those, edges with ends of one sign crossing the surface twice or more
@@ -84,8 +84,11 @@ struct MorphResult {
 /// union bounding box plus padding), with no values. Throws InvalidInput for invalid options or an empty box.
 MorphField morph_lattice(const Surface& A, const Surface& B, const MorphOptions& options);
 
-/// Builds dA and dB on a lattice covering both (closed, manifold) surfaces plus padding.
-MorphResult build_morph(const Surface& A, const Surface& B, const MorphOptions& options);
+/// Builds dA and dB on a lattice covering both (closed, manifold) surfaces plus padding. `checks`, when given, is
+/// A's and B's check_surface (two entries, e.g. as validate_surface returned them while loading): the topology the
+/// thin features keep; computed here otherwise.
+MorphResult build_morph(const Surface& A, const Surface& B, const MorphOptions& options,
+                        const SurfaceCheck* checks = nullptr);
 
 /// Samples analytic signed distances on a cubic lattice of n^3 points spanning [-extent, extent]^3:
 /// exact fields for tests and benchmarks of the stages after the morph.

@@ -12,6 +12,7 @@
 #include <string>
 #include <utility>
 
+#include "mesh/adjacency.h"
 #include "mesh/errors.h"
 
 namespace morphmap {
@@ -91,26 +92,6 @@ std::int64_t vote_by_winding(const SurfaceLocator& locator, const MorphField& fi
   return grazing;
 }
 
-// Union-find over lattice points (path halving; the root is the smaller index, so the result is order-free).
-struct Components {
-  std::vector<std::int64_t> parent;
-  explicit Components(std::size_t n) : parent(n) {
-    for (std::size_t i = 0; i < n; ++i) parent[i] = std::int64_t(i);
-  }
-  std::int64_t find(std::int64_t x) {
-    while (parent[std::size_t(x)] != x) {
-      parent[std::size_t(x)] = parent[std::size_t(parent[std::size_t(x)])];
-      x = parent[std::size_t(x)];
-    }
-    return x;
-  }
-  void join(std::int64_t a, std::int64_t b) {
-    a = find(a);
-    b = find(b);
-    if (a != b) parent[std::size_t(std::max(a, b))] = std::min(a, b);
-  }
-};
-
 // The Kuhn simplices with lowest vertex q: chains of nonempty subsets S1 < S2 < ... of {x, y, z} (bit masks), each
 // vertex q + S; every simplex of the triangulation has one such form, inside the cube at q. 7 edges, 12 triangles and
 // 6 tets, so a point whose cube has one sign throughout adds 1 - 7 + 12 - 6 = 0 to chi: only cubes the zero set
@@ -164,12 +145,12 @@ void for_each_crossed_cube(const MorphField& field, const std::vector<float>& va
 }
 
 // Regions of one sign joined by Kuhn edges, over the points not `excluded` (may be empty). Slabs of k are joined in
-// parallel (every index a slab's joins and finds touch lies in the slab), then the edges between slabs in order; the
-// partition does not depend on that order, and each region's root is its smallest index either way.
-Components sign_regions(const MorphField& field, const std::vector<float>& values,
-                        const std::vector<std::uint8_t>& excluded, const KuhnStar& star) {
+// parallel (every index a slab's unions and finds touch lies in the slab), then the edges between slabs in order;
+// the partition does not depend on that order, and each region's root is its smallest index either way.
+DisjointSets sign_regions(const MorphField& field, const std::vector<float>& values,
+                          const std::vector<std::uint8_t>& excluded, const KuhnStar& star) {
   const Eigen::Vector3i& n = field.dims;
-  Components parts(values.size());
+  DisjointSets parts(values.size());
   const auto join_edges = [&](int i, int j, int k, bool within, int k_end) {
     const std::int64_t q = field.index(i, j, k);
     if (!excluded.empty() && excluded[std::size_t(q)]) return;
@@ -179,7 +160,7 @@ Components sign_regions(const MorphField& field, const std::vector<float>& value
       if (i + kEdges[e][0] >= n.x() || j + kEdges[e][1] >= n.y() || ok >= n.z()) continue;
       if ((ok < k_end) != within) continue;
       const std::int64_t o = q + star.edge[e];
-      if ((excluded.empty() || !excluded[std::size_t(o)]) && (values[std::size_t(o)] < 0.0f) == in) parts.join(q, o);
+      if ((excluded.empty() || !excluded[std::size_t(o)]) && (values[std::size_t(o)] < 0.0f) == in) parts.unite(q, o);
     }
   };
   constexpr int kSlabs = 16;
@@ -218,7 +199,7 @@ LatticeTopology lattice_topology(const MorphField& field, const std::vector<floa
     }
     chi[std::size_t(k)] += sum;
   });
-  Components parts = sign_regions(field, values, {}, star);
+  DisjointSets parts = sign_regions(field, values, {}, star);
   std::int64_t regions = 0;
   for (std::size_t q = 0; q < values.size(); ++q) regions += parts.find(std::int64_t(q)) == std::int64_t(q);
   LatticeTopology topology;
@@ -267,7 +248,7 @@ class CandidateTopology {
       fixed_chi_ += chi[k];
       simplices_.insert(simplices_.end(), touching[k].begin(), touching[k].end());
     }
-    Components parts = sign_regions(field, values, candidate, star);
+    DisjointSets parts = sign_regions(field, values, candidate, star);
     std::vector<std::int64_t> id(values.size(), -1);
     for (std::size_t q = 0; q < values.size(); ++q)
       if (!candidate[q] && parts.find(std::int64_t(q)) == std::int64_t(q)) id[q] = fixed_regions_++;
@@ -301,12 +282,12 @@ class CandidateTopology {
       }
       if (all) fixed_chi_delta(chi, size);
     }
-    Components regions(std::size_t(fixed_regions_ + candidates_));
+    DisjointSets regions(std::size_t(fixed_regions_ + candidates_));
     for (const auto& link : links_)
       if ((values_[std::size_t(link[0])] < 0.0f) == (values_[std::size_t(link[1])] < 0.0f))
-        regions.join(link[2], link[3]);
+        regions.unite(link[2], link[3]);
     std::int64_t count = 0;
-    for (std::size_t r = 0; r < regions.parent.size(); ++r) count += regions.find(std::int64_t(r)) == std::int64_t(r);
+    for (std::int64_t r = 0; r < fixed_regions_ + candidates_; ++r) count += regions.find(r) == r;
     return {2 * chi, count - 1};
   }
 
@@ -342,13 +323,13 @@ GroupOutcome flip_groups(const MorphField& field, std::vector<float>& values, co
   const Eigen::Vector3i& n = field.dims;
   std::vector<std::uint8_t> candidate(values.size(), 0);
   for (const std::int64_t q : points) candidate[std::size_t(q)] = 1;
-  Components groups(values.size());
+  DisjointSets groups(values.size());
   for (const std::int64_t q : points) {
     const int i = int(q % n.x()), j = int((q / n.x()) % n.y()), k = int(q / (std::int64_t(n.x()) * n.y()));
     for (const auto& d : kEdges) {
       if (i + d[0] >= n.x() || j + d[1] >= n.y() || k + d[2] >= n.z()) continue;
       const std::int64_t o = field.index(i + d[0], j + d[1], k + d[2]);
-      if (candidate[std::size_t(o)]) groups.join(q, o);
+      if (candidate[std::size_t(o)]) groups.unite(q, o);
     }
   }
   std::vector<std::vector<std::int64_t>> members;

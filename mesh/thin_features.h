@@ -1,8 +1,8 @@
 // A surface's topology kept on the lattice (paper §5.1: the morph's ends are the surfaces' distance fields sampled at
 // lattice points, and §5.2 extracts the zero set of the samples). Two things open handles there that the surface
 // does not have. (1) OpenVDB's signs are wrong at some points near thin parts (measured: 152 lattice points of the
-// bunny at 40 voxels, all within two voxels of its ears); the parity of the surface's crossings along the lattice
-// lines decides inside and outside instead. (2) A sheet or rod thinner than a voxel, or a gap narrower than one, can
+// bunny at 40 voxels, all within two voxels of its ears); the surface's winding number along the lattice lines
+// decides inside and outside instead. (2) A sheet or rod thinner than a voxel, or a gap narrower than one, can
 // fall between lattice points, so no point lies inside the ear there and the extracted zero set has a hole (or joins
 // two parts across the gap). An edge of the lattice's Kuhn triangulation whose ends have one sign and which crosses
 // the surface twice passes through such a part; moving its end nearer the surface to the other side puts the part
@@ -27,15 +27,17 @@ struct LatticeTopology {
 LatticeTopology lattice_topology(const MorphField& field, const std::vector<float>& values);
 
 /// Corrects the signs of `values` (field.dims.prod() entries in MorphField's layout: dA or dB of `field`) by the
-/// parity of crossings along the lattice lines through each point (the majority of the three axes; a line with an
-/// odd number of crossings, which grazes the surface, does not vote), then moves lattice points across thin parts:
-/// of every Kuhn edge ((i, j, k) + d, d in {0, 1}^3 \ 0, the triangulation extract_hypersurface uses) whose ends have
-/// one sign and which crosses the surface twice or more, the end nearer the surface (smaller |d|; the lower index on a
-/// tie) is a candidate to take the other sign. A value changes sign only (|d| is the distance either way), or becomes
-/// +-1e-6 h when it is zero. `locator` is built on `surface`. The result does not depend on the thread count. Thin
-/// parts are moved one group at a time (points joined by Kuhn edges), and a group is kept only when it brings the zero
-/// set's topology nearer `target` (the surface's own: |Euler difference| + |components difference| falls), so a rod
-/// thinner than a voxel, whose moved ends would ring it with a handle, is left as it was.
+/// winding number along the lattice lines through each point (the majority of the three axes; a line whose crossings'
+/// directions do not sum to zero, which grazes the surface, does not vote), then moves lattice points across thin
+/// parts: of every Kuhn edge ((i, j, k) + d, d in {0, 1}^3 \ 0, the triangulation extract_hypersurface uses) whose ends
+/// have one sign and which crosses the surface twice or more, the end nearer the surface (smaller |d|; the lower index
+/// on a tie) is a candidate to take the other sign. A value changes sign only (|d| is the distance either way), or
+/// becomes
+/// +-1e-6 h when it is zero. `locator` is built on `surface`. The result does not depend on the thread count. Sign
+/// corrections (kept unless they take the topology further away) and thin parts are moved one group at a time (points
+/// joined by Kuhn edges), and a group is kept only when it brings the zero set's topology nearer `target` (the
+/// surface's own: |Euler difference| + |components difference| falls), so a rod thinner than a voxel, whose moved ends
+/// would ring it with a handle, is left as it was.
 ThinFeatureResult keep_thin_features(const SurfaceLocator& locator, const MorphField& field, std::vector<float>& values,
                                      const LatticeTopology& target, const ThinFeatureOptions& options = {});
 

@@ -344,6 +344,19 @@ class Untangler {
     return moves;
   }
 
+  /// u's label in the plane through `origin` normal to the unit `axis`, entered along u's own A normal (the inverse of
+  /// the closest-point lift that takes a point of the plane back to A), in the plane's axes e1, e2; false where that
+  /// normal turns away from the axis (no chart holds u).
+  bool to_chart(int u, const Eigen::Vector3d& origin, const Eigen::Vector3d& axis, const Eigen::Vector3d& e1,
+                const Eigen::Vector3d& e2, Eigen::Vector2d& out) const {
+    const Eigen::Vector3d q = labels_.row(u).transpose();
+    const Eigen::Vector3d n = face_normal(face_of_[std::size_t(u)]).normalized();
+    const double along = n.dot(axis);
+    const Eigen::Vector3d x = q + ((origin - q).dot(axis) / along) * n - origin;
+    out = Eigen::Vector2d(x.dot(e1), x.dot(e2));
+    return along > 0.2;
+  }
+
   /// Fills ring.a and ring.b for v; false where a corner's A normal turns away from v's (no chart holds them). The
   /// corners enter the plane along their own A normals, the inverse of the closest-point lift that takes a point
   /// of the plane back to A.
@@ -355,20 +368,15 @@ class Untangler {
     ring.a.clear();
     ring.b.clear();
     bool ok = true;
-    auto to_chart = [&](int u) {
-      const Eigen::Vector3d q = labels_.row(u).transpose();
-      const Eigen::Vector3d n = face_normal(face_of_[std::size_t(u)]).normalized();
-      const double along = n.dot(axis);
-      if (!(along > 0.2)) ok = false;
-      const Eigen::Vector3d x = q + ((ring.origin - q).dot(axis) / along) * n - ring.origin;
-      return Eigen::Vector2d(x.dot(ring.e1), x.dot(ring.e2));
-    };
     for (int j = vf_.begin(v); j < vf_.end(v) && ok; ++j) {
       const int f = vf_.face(j);
       int k = 0;
       while (F_(f, k) != v) ++k;
-      ring.a.push_back(to_chart(F_(f, (k + 1) % 3)));
-      ring.b.push_back(to_chart(F_(f, (k + 2) % 3)));
+      Eigen::Vector2d a = Eigen::Vector2d::Zero(), b = Eigen::Vector2d::Zero();
+      ok = to_chart(F_(f, (k + 1) % 3), ring.origin, axis, ring.e1, ring.e2, a) &&
+           to_chart(F_(f, (k + 2) % 3), ring.origin, axis, ring.e1, ring.e2, b);
+      ring.a.push_back(a);
+      ring.b.push_back(b);
     }
     return ok;
   }
@@ -586,12 +594,7 @@ class Untangler {
       const int v = vertices[std::size_t(i)];
       slot[std::size_t(v)] = i;
       if (!fixed[std::size_t(i)]) continue;
-      const Eigen::Vector3d q = labels_.row(v).transpose();
-      const Eigen::Vector3d normal = face_normal(face_of_[std::size_t(v)]).normalized();
-      const double along = normal.dot(axis);
-      if (!(along > 0.2)) return false;
-      const Eigen::Vector3d y = q + ((origin - q).dot(axis) / along) * normal - origin;
-      x[std::size_t(i)] = Eigen::Vector2d(y.dot(e1), y.dot(e2));
+      if (!to_chart(v, origin, axis, e1, e2, x[std::size_t(i)])) return false;
     }
     // The loop, with the patch on its left, must be a simple counter-clockwise polygon in the chart.
     const std::size_t m = loop.size();
