@@ -96,6 +96,10 @@ void add_pipeline_options(CLI::App& cmd, PipelineOptions& o) {
                  "relative to its size")
       ->check(CLI::PositiveNumber)
       ->capture_default_str();
+  cmd.add_option("--trace-order", o.trace.order,
+                 "Characteristic tracing: order of the Runge-Kutta step in each tet, 2 (Heun) or 4 (classical)")
+      ->check(CLI::IsMember({2, 4}))
+      ->capture_default_str();
   cmd.add_option("--trace-smoothing", o.trace.field_smoothing,
                  "Characteristic tracing: passes of neighbour averaging of the flow field before tracing")
       ->check(CLI::Range(0, 100))

@@ -88,22 +88,33 @@ TEST(TraceTest, ConcentricSpheresTraceRadiallyLikeTheUpwindSweep) {
   const TetMesh4 mesh = product_mesh(sphere, 6, 1.0, 1.0, 2.0);
   const Eigen::VectorXd s = time_field(mesh);
   const Eigen::MatrixXd field = gradient_field(mesh, s);
-  std::vector<int> ids;
-  const TraceResult r = trace_to_source(mesh, s, field, b_vertices(mesh, ids));
-  EXPECT_EQ(r.reached, std::int64_t(ids.size()));
-  EXPECT_GT(r.tet_pieces, std::int64_t(ids.size()));
-  // Every piece costs at least choose()'s rate of the simplex it picks (which starts the RK4 step) and the step's
-  // three further evaluations.
-  EXPECT_GE(r.rate_evaluations, 4 * (r.tet_pieces + r.face_pieces + r.edge_pieces));
-  const double traced = worst_radial(sphere, ids, r.end);
-
   const TransportResult upwind = transport_labels(mesh, s, field, [](const Eigen::Vector3d& x) { return x; });
+  std::vector<int> ids;
+  const std::vector<MeshPoint> starts = b_vertices(mesh, ids);
   Eigen::MatrixXd upwind_b(Eigen::Index(ids.size()), 3);
   for (std::size_t i = 0; i < ids.size(); ++i) upwind_b.row(Eigen::Index(i)) = upwind.labels.row(ids[i]);
   const double swept = worst_radial(sphere, ids, upwind_b);
-  EXPECT_LT(traced, 0.02);
   EXPECT_LT(swept, 0.02);
-  EXPECT_LT(traced, 2.0 * swept) << "traced " << traced << ", upwind " << swept;
+  Eigen::MatrixXd ends[2];
+  for (const int order : {2, 4}) {
+    TraceOptions options;
+    options.order = order;
+    const TraceResult r = trace_to_source(mesh, s, field, starts, options);
+    EXPECT_EQ(r.reached, std::int64_t(ids.size())) << "order " << order;
+    EXPECT_GT(r.tet_pieces, std::int64_t(ids.size()));
+    // Every piece costs at least choose()'s rate of the simplex it picks (which starts the step) and the step's
+    // further evaluations: one for Heun's, three for the classical step, plus the rate at its end.
+    EXPECT_GE(r.rate_evaluations, (order == 2 ? 2 : 5) * (r.tet_pieces + r.face_pieces + r.edge_pieces));
+    const double traced = worst_radial(sphere, ids, r.end);
+    EXPECT_LT(traced, 0.02) << "order " << order;
+    EXPECT_LT(traced, 2.0 * swept) << "order " << order << ": traced " << traced << ", upwind " << swept;
+    ends[order / 4] = r.end;
+  }
+  // The two integrators solve the same ODE: far closer to each other than to the radial map (the faceting).
+  EXPECT_LT((ends[0] - ends[1]).rowwise().norm().maxCoeff(), 1e-3);
+  TraceOptions bad;
+  bad.order = 3;
+  EXPECT_THROW(trace_to_source(mesh, s, field, starts, bad), InvalidInput);
 }
 
 TEST(TraceTest, ResultDoesNotDependOnThreadCount) {
