@@ -121,6 +121,13 @@ void add_pipeline_options(CLI::App& cmd, PipelineOptions& o) {
       ->check(CLI::IsMember({"on", "off"}))
       ->default_str("off");
   cmd.add_option_function<std::string>(
+         "--stalled-fill", [&o](const std::string& value) { o.stalled_fill = value; },
+         "Label the target's vertices whose characteristic stalls (parts born during the morph) from the traced "
+         "vertices around them, by a mean-value convex combination, instead of the point of the source nearest to "
+         "where the trace stopped (auto: with --fold-repair on; on; off)")
+      ->check(CLI::IsMember({"auto", "on", "off"}))
+      ->default_str("auto");
+  cmd.add_option_function<std::string>(
          "--thin-features", [&o](const std::string& value) { o.morph.thin.enabled = value == "on"; },
          "Keep sheets, rods and gaps thinner than a voxel on the lattice: a lattice edge crossing a mesh twice moves "
          "its end nearer the surface to the other side, so thin parts open no handles (on or off)")

@@ -545,13 +545,20 @@ PipelineResult run_pipeline(const PipelineOptions& options) {
   // was 60% of the tracing on cow -> horse (31 k of 49 k characteristics). The labels the target's seam split
   // reads are kept apart (target_labels_4d), so the traces of slices do not change them.
   Eigen::MatrixXd target_labels_4d;
+  LabelFillResult label_fill;
   auto trace_target_labels = [&](SliceMesh& target) {
     if (options.method != "trace") return;
     const TraceResult traced = onto_a(tracer->trace(edge_points(target.source_edge, target.edge_weight)));
     add_trace(traced);
     std::vector<char> provisional(std::size_t(mesh.vertex_count()), 0);
+    target.labels = traced.end;
+    std::vector<char> stalled(std::size_t(target.V.rows()), 0);
+    for (Eigen::Index i = 0; i < target.V.rows(); ++i)
+      stalled[std::size_t(i)] = traced.status[std::size_t(i)] == TraceStatus::Stalled;
+    LabelFillOptions fill_options;
+    fill_options.enabled = options.stalled_fill == "on" || (options.stalled_fill == "auto" && options.untangle.enabled);
+    label_fill = fill_stalled_labels(target.V, target.F, stalled, locator, target.labels, fill_options);
     for (Eigen::Index i = 0; i < target.V.rows(); ++i) {
-      target.labels.row(i) = traced.end.row(i);
       const int v = target.source_edge(i, 0);  // a B vertex: source_edge(i, 1) == v, weight 0
       mesh_labels.row(v) = target.labels.row(i);
       vertex_traced[std::size_t(v)] = 1;
@@ -810,6 +817,12 @@ PipelineResult run_pipeline(const PipelineOptions& options) {
       {"min_volume_ratio", quality.min_volume_ratio},
       {"dihedral_histogram_10deg", quality.dihedral_histogram}};
   report["stretch"] = nlohmann::json::parse(stretch_json(stretch));
+  if (options.method == "trace" && !user_target)
+    report["stalled_fill"] = {{"mode", options.stalled_fill},
+                              {"filled", label_fill.filled},
+                              {"patches", label_fill.patches},
+                              {"unbounded", label_fill.unbounded},
+                              {"seconds", label_fill.seconds}};
   if (repair)
     report["fold_repair"] = {
         {"enabled", true},

@@ -1,0 +1,97 @@
+// Labels for stalled characteristics (see label_fill.h; paper §7).
+#include "mesh/label_fill.h"
+
+#include <Eigen/Geometry>
+#include <Eigen/SparseCore>
+#include <Eigen/SparseLU>
+#include <chrono>
+#include <cmath>
+#include <string>
+
+#include "mesh/adjacency.h"
+#include "mesh/errors.h"
+
+namespace morphmap {
+
+LabelFillResult fill_stalled_labels(const Eigen::MatrixXd& V, const TriIndices& F, const std::vector<char>& stalled,
+                                    const SurfaceLocator& locator, Eigen::MatrixXd& labels,
+                                    const LabelFillOptions& options) {
+  const auto start = std::chrono::steady_clock::now();
+  const Eigen::Index nv = V.rows();
+  if (V.cols() != 3 || labels.rows() != nv || labels.cols() != 3 || stalled.size() != std::size_t(nv))
+    throw InvalidInput("fill_stalled_labels: V and labels must be #V by 3 and stalled #V (" + std::to_string(nv) +
+                       " vertices)");
+  if (F.size() > 0 && (F.minCoeff() < 0 || F.maxCoeff() >= nv))
+    throw InvalidInput("fill_stalled_labels: a triangle's vertex index is out of range");
+  LabelFillResult result;
+  auto finish = [&]() {
+    result.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+    return result;
+  };
+  if (!options.enabled) return finish();
+
+  // Patches: stalled vertices joined by B's edges; a patch is bounded when an edge leaves it to a traced vertex.
+  DisjointSets patches(nv);
+  std::vector<char> bounded(std::size_t(nv), 0);
+  for (Eigen::Index f = 0; f < F.rows(); ++f)
+    for (int k = 0; k < 3; ++k) {
+      const int i = F(f, k), j = F(f, (k + 1) % 3);
+      if (stalled[std::size_t(i)] && stalled[std::size_t(j)]) patches.unite(i, j);
+    }
+  for (Eigen::Index f = 0; f < F.rows(); ++f)
+    for (int k = 0; k < 3; ++k) {
+      const int i = F(f, k), j = F(f, (k + 1) % 3);
+      if (stalled[std::size_t(i)] != stalled[std::size_t(j)])
+        bounded[std::size_t(patches.find(stalled[std::size_t(i)] ? i : j))] = 1;
+    }
+  std::vector<int> unknown(std::size_t(nv), -1);
+  int unknowns = 0;
+  for (Eigen::Index v = 0; v < nv; ++v) {
+    if (!stalled[std::size_t(v)]) continue;
+    const Eigen::Index root = patches.find(v);
+    if (!bounded[std::size_t(root)]) {
+      ++result.unbounded;
+      continue;
+    }
+    if (root == v) ++result.patches;
+    unknown[std::size_t(v)] = unknowns++;
+  }
+  if (unknowns == 0) return finish();
+
+  // Floater's mean value weights on B, w_ij = (tan(alpha/2) + tan(beta/2)) / |v_i - v_j| with the angles at v_i
+  // beside edge ij: positive, so each filled label is a convex combination of its neighbours' and the patch is a
+  // Tutte embedding of B's shape between the traced labels around it.
+  std::vector<Eigen::Triplet<double>> triplets;
+  Eigen::MatrixXd rhs = Eigen::MatrixXd::Zero(unknowns, 3);
+  for (Eigen::Index f = 0; f < F.rows(); ++f)
+    for (int k = 0; k < 3; ++k) {
+      const int i = F(f, k);
+      const int row = unknown[std::size_t(i)];
+      if (row < 0) continue;
+      const Eigen::Vector3d a = V.row(F(f, (k + 1) % 3)) - V.row(i), b = V.row(F(f, (k + 2) % 3)) - V.row(i);
+      const double half_tan = std::tan(0.5 * std::atan2(a.cross(b).norm(), a.dot(b)));
+      for (const auto& [j, length] :
+           {std::pair<int, double>(F(f, (k + 1) % 3), a.norm()), std::pair<int, double>(F(f, (k + 2) % 3), b.norm())}) {
+        const double w = half_tan / length;
+        if (!(length > 0.0) || !std::isfinite(w) || !(w > 0.0)) continue;  // a degenerate corner adds nothing
+        triplets.emplace_back(row, row, w);
+        if (unknown[std::size_t(j)] >= 0)
+          triplets.emplace_back(row, unknown[std::size_t(j)], -w);
+        else
+          rhs.row(row) += w * labels.row(j);
+      }
+    }
+  Eigen::SparseMatrix<double> L(unknowns, unknowns);
+  L.setFromTriplets(triplets.begin(), triplets.end());
+  Eigen::SparseLU<Eigen::SparseMatrix<double>> lu(L);
+  if (lu.info() != Eigen::Success) return finish();  // a vertex with only degenerate corners: nothing changes
+  const Eigen::MatrixXd solution = lu.solve(rhs);
+  if (lu.info() != Eigen::Success || !solution.allFinite()) return finish();
+  const std::vector<SurfaceHit> hits = locator.closest_all(solution);
+  for (Eigen::Index v = 0; v < nv; ++v)
+    if (unknown[std::size_t(v)] >= 0) labels.row(v) = hits[std::size_t(unknown[std::size_t(v)])].point.transpose();
+  result.filled = unknowns;
+  return finish();
+}
+
+}  // namespace morphmap
