@@ -818,11 +818,9 @@ PipelineResult run_pipeline(const PipelineOptions& options) {
       {"dihedral_histogram_10deg", quality.dihedral_histogram}};
   report["stretch"] = nlohmann::json::parse(stretch_json(stretch));
   if (options.method == "trace" && !user_target)
-    report["stalled_fill"] = {{"mode", options.stalled_fill},
-                              {"filled", label_fill.filled},
-                              {"patches", label_fill.patches},
-                              {"unbounded", label_fill.unbounded},
-                              {"seconds", label_fill.seconds}};
+    report["stalled_fill"] = {{"mode", options.stalled_fill},        {"filled", label_fill.filled},
+                              {"patches", label_fill.patches},       {"unbounded", label_fill.unbounded},
+                              {"coincident", label_fill.coincident}, {"seconds", label_fill.seconds}};
   if (repair)
     report["fold_repair"] = {
         {"enabled", true},

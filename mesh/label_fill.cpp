@@ -29,6 +29,18 @@ LabelFillResult fill_stalled_labels(const Eigen::MatrixXd& V, const TriIndices& 
     return result;
   };
   if (!options.enabled) return finish();
+  std::vector<char> fill = stalled;
+  if (options.coincident && nv > 0) {
+    const double tolerance =
+        options.coincident_tolerance * (labels.colwise().maxCoeff() - labels.colwise().minCoeff()).norm();
+    for (Eigen::Index f = 0; f < F.rows(); ++f)
+      for (int k = 0; k < 3; ++k) {
+        const int i = F(f, k), j = F(f, (k + 1) % 3);
+        if (!((labels.row(i) - labels.row(j)).norm() <= tolerance)) continue;
+        for (const int v : {i, j})
+          if (!fill[std::size_t(v)]) fill[std::size_t(v)] = 1, ++result.coincident;
+      }
+  }
 
   // Patches: stalled vertices joined by B's edges; a patch is bounded when an edge leaves it to a traced vertex.
   DisjointSets patches(nv);
@@ -36,18 +48,18 @@ LabelFillResult fill_stalled_labels(const Eigen::MatrixXd& V, const TriIndices& 
   for (Eigen::Index f = 0; f < F.rows(); ++f)
     for (int k = 0; k < 3; ++k) {
       const int i = F(f, k), j = F(f, (k + 1) % 3);
-      if (stalled[std::size_t(i)] && stalled[std::size_t(j)]) patches.unite(i, j);
+      if (fill[std::size_t(i)] && fill[std::size_t(j)]) patches.unite(i, j);
     }
   for (Eigen::Index f = 0; f < F.rows(); ++f)
     for (int k = 0; k < 3; ++k) {
       const int i = F(f, k), j = F(f, (k + 1) % 3);
-      if (stalled[std::size_t(i)] != stalled[std::size_t(j)])
-        bounded[std::size_t(patches.find(stalled[std::size_t(i)] ? i : j))] = 1;
+      if (fill[std::size_t(i)] != fill[std::size_t(j)])
+        bounded[std::size_t(patches.find(fill[std::size_t(i)] ? i : j))] = 1;
     }
   std::vector<int> unknown(std::size_t(nv), -1);
   int unknowns = 0;
   for (Eigen::Index v = 0; v < nv; ++v) {
-    if (!stalled[std::size_t(v)]) continue;
+    if (!fill[std::size_t(v)]) continue;
     const Eigen::Index root = patches.find(v);
     if (!bounded[std::size_t(root)]) {
       ++result.unbounded;

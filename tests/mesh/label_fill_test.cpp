@@ -63,6 +63,31 @@ TEST(LabelFillTest, StalledCapCollapsedToOnePointIsSpreadBackOverItsPatch) {
   EXPECT_EQ(untouched, copy);
 }
 
+TEST(LabelFillTest, NeighboursWithOneLabelAreFilledUnlessTurnedOff) {
+  // Two neighbours whose characteristics merged into one point: their edge collapses, and so do its triangles.
+  const Surface A = unit_sphere();
+  const SurfaceLocator locator(A);
+  Eigen::MatrixXd labels = A.V;
+  const int a = A.F(0, 0), b = A.F(0, 1);
+  labels.row(b) = labels.row(a);
+  EXPECT_GT(measure_stretch(A, A.V, A.F, labels).collapsed, 0);
+  const std::vector<char> none(std::size_t(A.V.rows()), 0);
+  LabelFillOptions off;
+  off.coincident = false;
+  Eigen::MatrixXd kept = labels;
+  EXPECT_EQ(fill_stalled_labels(A.V, A.F, none, locator, kept, off).filled, 0);
+  EXPECT_EQ(kept, labels);
+
+  const LabelFillResult r = fill_stalled_labels(A.V, A.F, none, locator, labels);
+  EXPECT_EQ(r.coincident, 2);
+  EXPECT_EQ(r.filled, 2);
+  const StretchResult after = measure_stretch(A, A.V, A.F, labels);
+  EXPECT_EQ(after.collapsed, 0);
+  EXPECT_EQ(after.folded, 0);
+  EXPECT_LT((labels.row(a) - A.V.row(a)).norm(), 0.05);
+  EXPECT_LT((labels.row(b) - A.V.row(b)).norm(), 0.05);
+}
+
 TEST(LabelFillTest, PatchWithNoTracedNeighbourKeepsItsLabelsAndBadSizesThrow) {
   const Surface A = unit_sphere();
   const SurfaceLocator locator(A);
