@@ -10,6 +10,7 @@
 
 #include "mesh/adjacency.h"
 #include "mesh/errors.h"
+#include "mesh/surface.h"
 
 namespace morphmap {
 
@@ -70,9 +71,8 @@ LabelFillResult fill_stalled_labels(const Eigen::MatrixXd& V, const TriIndices& 
   }
   if (unknowns == 0) return finish();
 
-  // Floater's mean value weights on B, w_ij = (tan(alpha/2) + tan(beta/2)) / |v_i - v_j| with the angles at v_i
-  // beside edge ij: positive, so each filled label is a convex combination of its neighbours' and the patch is a
-  // Tutte embedding of B's shape between the traced labels around it.
+  // Mean value weights on B: each filled label is a convex combination of its neighbours', and the patch a Tutte
+  // embedding of B's shape between the traced labels around it.
   std::vector<Eigen::Triplet<double>> triplets;
   Eigen::MatrixXd rhs = Eigen::MatrixXd::Zero(unknowns, 3);
   for (Eigen::Index f = 0; f < F.rows(); ++f)
@@ -80,12 +80,8 @@ LabelFillResult fill_stalled_labels(const Eigen::MatrixXd& V, const TriIndices& 
       const int i = F(f, k);
       const int row = unknown[std::size_t(i)];
       if (row < 0) continue;
-      const Eigen::Vector3d a = V.row(F(f, (k + 1) % 3)) - V.row(i), b = V.row(F(f, (k + 2) % 3)) - V.row(i);
-      const double half_tan = std::tan(0.5 * std::atan2(a.cross(b).norm(), a.dot(b)));
-      for (const auto& [j, length] :
-           {std::pair<int, double>(F(f, (k + 1) % 3), a.norm()), std::pair<int, double>(F(f, (k + 2) % 3), b.norm())}) {
-        const double w = half_tan / length;
-        if (!(length > 0.0) || !std::isfinite(w) || !(w > 0.0)) continue;  // a degenerate corner adds nothing
+      for (const auto& [j, w] : mean_value_weights(V, F, f, k)) {
+        if (!std::isfinite(w) || !(w > 0.0)) continue;  // a degenerate corner adds nothing
         triplets.emplace_back(row, row, w);
         if (unknown[std::size_t(j)] >= 0)
           triplets.emplace_back(row, unknown[std::size_t(j)], -w);

@@ -4,10 +4,13 @@
 
 #include <Eigen/Core>
 #include <Eigen/Geometry>
+#include <array>
+#include <cmath>
 #include <cstdint>
 #include <functional>
 #include <memory>
 #include <string>
+#include <utility>
 #include <vector>
 
 namespace morphmap {
@@ -74,5 +77,18 @@ double signed_volume(const Eigen::MatrixXd& V, const Eigen::MatrixXi& F);
 
 /// Total area of the triangles.
 double surface_area(const Eigen::MatrixXd& V, const Eigen::MatrixXi& F);
+
+/// Floater's mean value weights (2003) at corner k of triangle f: for the edges from F(f, k) to F(f, k + 1) and to
+/// F(f, k + 2), tan(alpha / 2) / |edge| with alpha the corner's angle, paired with the vertex at the edge's far end.
+/// Summed over the two triangles beside an edge they give w_ij, positive, so a Tutte embedding with them is one to
+/// one inside a convex boundary and reproduces the surface's shape where it is flat. NaN for a zero-length edge.
+template <class Faces>
+std::array<std::pair<int, double>, 2> mean_value_weights(const Eigen::MatrixXd& V, const Faces& F, Eigen::Index f,
+                                                         int k) {
+  const int i = int(F(f, k)), j = int(F(f, (k + 1) % 3)), l = int(F(f, (k + 2) % 3));
+  const Eigen::Vector3d vi = V.row(i), a = V.row(j).transpose() - vi, b = V.row(l).transpose() - vi;
+  const double half_tan = std::tan(0.5 * std::atan2(a.cross(b).norm(), a.dot(b)));
+  return {{{j, half_tan / a.norm()}, {l, half_tan / b.norm()}}};
+}
 
 }  // namespace morphmap

@@ -634,9 +634,7 @@ class Untangler {
         if (((d1 > 0) != (d2 > 0)) && ((d3 > 0) != (d4 > 0))) return false;
       }
 
-    // Floater's mean value weights of B's own triangles: w_ij = (tan(alpha/2) + tan(beta/2)) / |v_i - v_j|, the
-    // angles at v_i next to edge ij; all positive, so with a convex boundary the layout is one-to-one (Tutte), and
-    // they reproduce B's shape where it is flat.
+    // Mean value weights of B's own triangles: with a convex boundary the layout is one to one (Tutte).
     std::vector<int> unknown(std::size_t(n), -1);
     int unknowns = 0;
     for (int i = 0; i < n; ++i)
@@ -648,13 +646,8 @@ class Untangler {
       for (int k = 0; k < 3; ++k) {
         const int i = slot[std::size_t(F_(f, k))];
         if (fixed[std::size_t(i)]) continue;
-        const Eigen::Vector3d vi = V_.row(F_(f, k)), vj = V_.row(F_(f, (k + 1) % 3)), vk = V_.row(F_(f, (k + 2) % 3));
-        const Eigen::Vector3d a = vj - vi, b = vk - vi;
-        const double angle = std::atan2(a.cross(b).norm(), a.dot(b)), half_tan = std::tan(0.5 * angle);
-        for (const auto& [other, length] : {std::pair<int, double>(F_(f, (k + 1) % 3), a.norm()),
-                                            std::pair<int, double>(F_(f, (k + 2) % 3), b.norm())}) {
-          if (!(length > 0.0)) return false;
-          const double w = half_tan / length;
+        for (const auto& [other, w] : mean_value_weights(V_, F_, f, k)) {
+          if (std::isnan(w)) return false;  // a zero-length edge
           const int j = slot[std::size_t(other)];
           triplets.emplace_back(unknown[std::size_t(i)], unknown[std::size_t(i)], w);
           if (fixed[std::size_t(j)])
