@@ -113,6 +113,11 @@ void add_pipeline_options(CLI::App& cmd, PipelineOptions& o) {
                  "connectivity)")
       ->check(CLI::IsMember({"all", "topological", "texture", "none"}))
       ->capture_default_str();
+  cmd.add_option("--seam-threshold", o.seams.label_threshold,
+                 "A source tet spans a topological seam (its triangles are split there) when two of its labels are "
+                 "farther apart than this fraction of the source's bounding-box diagonal")
+      ->check(CLI::PositiveNumber)
+      ->capture_default_str();
   cmd.add_option_function<std::string>(
          "--fold-repair", [&o](const std::string& value) { o.untangle.enabled = value == "on"; },
          "Repair folded and collapsed triangles of the target's map by local untangling in charts of the "

@@ -829,6 +829,8 @@ PipelineResult run_pipeline(const PipelineOptions& options) {
         {"folded_after", untangle.folded_after},
         {"collapsed_after", untangle.collapsed_after},
         {"seam_triangles", untangle.seam_triangles},
+        {"stretched_before", untangle.stretched_before},
+        {"stretched_after", untangle.stretched_after},
         {"patches_tried", untangle.patches_tried},
         {"patches_rebuilt", untangle.patches_rebuilt},
         {"patch_vertices", untangle.patch_vertices},

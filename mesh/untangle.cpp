@@ -19,6 +19,7 @@
 #include <vector>
 
 #include "mesh/errors.h"
+#include "mesh/metrics.h"
 
 namespace morphmap {
 
@@ -57,6 +58,7 @@ struct Ring {
   std::vector<Eigen::Matrix2d> inverse_shape;  // P^-1, P the triangle's B edges from the vertex in its own plane
   std::vector<double> shape_det, shape_area;
   std::vector<char> active;
+  std::vector<char> seam;  // the triangle spans a topological seam: outside the energy, its corners maybe off the chart
 };
 
 /// The position x that maximises the smallest signed area of the triangles (x, a_k, b_k), each area c_k + g_k . x
@@ -141,7 +143,9 @@ class Untangler {
     result.folded_before = count(kFolded);
     result.collapsed_before = count(kCollapsed);
     result.seam_triangles = count(kSeam);
-    if (!options_.enabled || result.folded_before + result.collapsed_before == 0) {
+    const std::vector<int> stretched = stretched_faces();
+    result.stretched_before = std::int64_t(stretched.size());
+    if (!options_.enabled || result.folded_before + result.collapsed_before + result.stretched_before == 0) {
       result.folded_after = result.folded_before;
       result.collapsed_after = result.collapsed_before;
       return result;
@@ -199,15 +203,45 @@ class Untangler {
       previous = now;
       grow(options_.grow_rings);
     }
-    grow(options_.smoothing_rings);
+    // Stretched triangles join the smoothing (not the untangling: nothing is inverted there). Where some stay
+    // stretched, their corners join in another round, seam vertices among them freed one round at a time.
+    std::vector<int> seeds = stretched;
+    for (int round = 0; round < std::max(1, options_.stretch_rounds); ++round) {
+      if (round > 0) {
+        reclassify_region();
+        seeds = stretched_faces();
+        if (seeds.empty()) break;
+        frontier_.clear();
+      }
+      for (const int f : seeds)
+        for (int k = 0; k < 3; ++k) {
+          const int v = F_(f, k);
+          if (options_.smooth_seam_sides) wall_[std::size_t(v)] = 0;
+          if (in_region_[std::size_t(v)] || wall_[std::size_t(v)]) continue;
+          in_region_[std::size_t(v)] = 1;
+          region_.push_back(v);
+          frontier_.push_back(v);
+        }
+      grow(options_.smoothing_rings);
+      smooth(result);
+    }
     result.region_vertices = std::int64_t(region_.size());
+    reclassify_region();
+    result.stretched_after = std::int64_t(stretched_faces().size());
+    result.folded_after = count(kFolded);
+    result.collapsed_after = count(kCollapsed);
+    result.vertices_moved = std::int64_t(std::count(moved_.begin(), moved_.end(), char(1)));
+    return result;
+  }
 
-    // Smoothing: symmetric Dirichlet descent, vertex by vertex, of the triangles positive in each chart; no step
-    // that keeps them positive folds one, and the squeezed patches the untangling righted spread out.
-    // Each sweep visits only the vertices next to one that moved in the sweep before: the patches far from the
-    // squeezed ones settle within a few sweeps, and those take many.
+ private:
+  /// Smoothing: symmetric Dirichlet descent, vertex by vertex, of the triangles positive in each chart; no step
+  /// that keeps them positive folds one, and the squeezed patches the untangling righted spread out.
+  /// Each sweep visits only the vertices next to one that moved in the sweep before: the patches far from the
+  /// squeezed ones settle within a few sweeps, and those take many.
+  void smooth(UntangleResult& result) {
     const auto classes = colour_classes();
-    std::vector<char> active(std::size_t(nv), 1), next(std::size_t(nv), 0);
+    std::vector<char> active(std::size_t(V_.rows()), 1), next(std::size_t(V_.rows()), 0);
     for (int sweep = 0; sweep < options_.smoothing_sweeps; ++sweep) {
       const std::int64_t moves =
           run_sweep(classes, active, &next, [&](int v, Ring& ring) { return smooth_vertex(v, ring); });
@@ -216,14 +250,18 @@ class Untangler {
       active.swap(next);
       std::fill(next.begin(), next.end(), 0);
     }
-    reclassify_region();
-    result.folded_after = count(kFolded);
-    result.collapsed_after = count(kCollapsed);
-    result.vertices_moved = std::int64_t(std::count(moved_.begin(), moved_.end(), char(1)));
-    return result;
   }
 
- private:
+  /// The good triangles whose L2 stretch exceeds UntangleOptions::stretch_seed, in order.
+  std::vector<int> stretched_faces() const {
+    std::vector<int> faces;
+    if (!(options_.stretch_seed > 0.0)) return faces;
+    const Eigen::VectorXd l2 = stretch_per_triangle(A_, V_, F_, labels_, {options_.collapse_ratio});
+    for (Eigen::Index f = 0; f < F_.rows(); ++f)
+      if (state_[std::size_t(f)] == kGood && l2(f) > options_.stretch_seed) faces.push_back(int(f));
+    return faces;
+  }
+
   /// Unnormalised outward normal of A's face f.
   Eigen::Vector3d face_normal(int f) const {
     const Eigen::Vector3d a0 = A_.V.row(A_.F(f, 0)), a1 = A_.V.row(A_.F(f, 1)), a2 = A_.V.row(A_.F(f, 2));
@@ -385,16 +423,20 @@ class Untangler {
     ring.e2 = axis.cross(ring.e1);
     ring.a.clear();
     ring.b.clear();
+    ring.seam.clear();
     bool ok = true;
     for (int j = vf_.begin(v); j < vf_.end(v) && ok; ++j) {
       const int f = vf_.face(j);
       int k = 0;
       while (F_(f, k) != v) ++k;
       Eigen::Vector2d a = Eigen::Vector2d::Zero(), b = Eigen::Vector2d::Zero();
+      const bool seam = state_[std::size_t(f)] == kSeam;
       ok = to_chart(F_(f, (k + 1) % 3), ring.origin, axis, ring.e1, ring.e2, a) &&
            to_chart(F_(f, (k + 2) % 3), ring.origin, axis, ring.e1, ring.e2, b);
+      ok = ok || seam;
       ring.a.push_back(a);
       ring.b.push_back(b);
+      ring.seam.push_back(seam);
     }
     return ok;
   }
@@ -456,8 +498,8 @@ class Untangler {
       ring.shape_area.push_back(0.5 * cross);
       const std::size_t i = ring.active.size();
       // Triangles the untangling could not right are left out, so that their neighbours can still spread.
-      ring.active.push_back(area(ring.a[i], ring.b[i]) > 0.0);
-      ring_area += std::abs(area(ring.a[i], ring.b[i]));
+      ring.active.push_back(area(ring.a[i], ring.b[i]) > 0.0 && !ring.seam[i]);
+      if (!ring.seam[i]) ring_area += std::abs(area(ring.a[i], ring.b[i]));
     }
     Eigen::Vector2d gradient;
     double curvature = 0.0;
@@ -470,13 +512,37 @@ class Untangler {
       // ring's mean, where it would count as a triangle of extreme stretch instead of a collapsed one.
       bool sliver = false;
       for (std::size_t k = 0; k < ring.a.size() && !sliver; ++k) {
-        if (ring.active[k]) continue;
+        if (ring.active[k] || ring.seam[k]) continue;
         const double after = area(ring.a[k] - step, ring.b[k] - step);
         sliver = after > 0.0 && after < options_.flat_fraction * ring_area / double(ring.a.size());
       }
       if (sliver) continue;
+      if (crosses_seam(v, ring, step)) continue;
       move(v, ring, step);
       return step.squaredNorm() > 1e-6 * ring_area / double(ring.a.size());
+    }
+    return false;
+  }
+
+  /// Whether moving v by `step` in its chart turns one of its seam triangles, positive on A, over: v would cross
+  /// the far side's edge, and the two sides of the seam would cover the same part of A (the smoothing leaves seam
+  /// triangles out of its energy, so nothing else holds a side back).
+  bool crosses_seam(int v, const Ring& ring, const Eigen::Vector2d& step) const {
+    if (std::find(ring.seam.begin(), ring.seam.end(), char(1)) == ring.seam.end()) return false;
+    const Eigen::Vector3d to = lift(ring.origin, ring.e1, ring.e2, step, face_of_[std::size_t(v)]).point;
+    std::size_t k = 0;
+    for (int j = vf_.begin(v); j < vf_.end(v); ++j, ++k) {
+      if (!ring.seam[k]) continue;
+      const int f = vf_.face(j);
+      int i = 0;
+      while (F_(f, i) != v) ++i;
+      const Eigen::Vector3d p = labels_.row(v).transpose(), a = labels_.row(F_(f, (i + 1) % 3)).transpose(),
+                            b = labels_.row(F_(f, (i + 2) % 3)).transpose();
+      auto positive = [&](const Eigen::Vector3d& x) {
+        const Eigen::Vector3d n = (a - x).cross(b - x);
+        return n.dot(face_normal(locator_.closest((x + a + b) / 3.0).face)) > 0.0;
+      };
+      if (positive(p) && !positive(to)) return true;
     }
     return false;
   }

@@ -98,20 +98,27 @@ TEST(Untangle, RightsACollapseAndAFoldOfTheIdentity) {
   for (const SurfaceHit& hit : hits) EXPECT_LT(hit.distance, 1e-9);
 }
 
+// The identity map with the labels of the vertices within `rings` mean edges of the unit point c replaced by
+// move(p) (then put back on the unit sphere).
+template <class Move>
+Eigen::MatrixXd moved_disk(const Surface& A, const Eigen::Vector3d& c, double rings, const Move& move) {
+  Eigen::MatrixXd labels = A.V;
+  const double h = mean_edge(A);
+  for (Eigen::Index i = 0; i < A.V.rows(); ++i) {
+    const Eigen::Vector3d p = A.V.row(i).transpose();
+    if ((p - c).norm() > rings * h) continue;
+    labels.row(i) = move(p).normalized().transpose();
+  }
+  return labels;
+}
+
 // The identity map with a disk of labels (about five rings) mirrored across a plane through its centre: every
 // triangle inside folds, and those across the mirror's rim jump far enough to count as seam triangles; more than
 // moving one vertex at a time can right.
 Eigen::MatrixXd mirrored_disk(const Surface& A) {
-  Eigen::MatrixXd labels = A.V;
-  const double h = mean_edge(A);
   const Eigen::Vector3d c = Eigen::Vector3d(1.0, 0.2, 0.1).normalized();
   const Eigen::Vector3d u = c.cross(Eigen::Vector3d::UnitZ()).normalized();
-  for (Eigen::Index i = 0; i < A.V.rows(); ++i) {
-    const Eigen::Vector3d p = A.V.row(i).transpose();
-    if ((p - c).norm() > 5.0 * h) continue;
-    labels.row(i) = (p - 2.0 * (p - c).dot(u) * u).normalized().transpose();
-  }
-  return labels;
+  return moved_disk(A, c, 5.0, [&](const Eigen::Vector3d& p) { return Eigen::Vector3d(p - 2.0 * (p - c).dot(u) * u); });
 }
 
 TEST(Untangle, PatchRebuildRightsAMirroredDisk) {
@@ -138,6 +145,37 @@ TEST(Untangle, PatchRebuildRightsAMirroredDisk) {
   local.rebuild_patches = false;
   Eigen::MatrixXd only_local = damaged;
   EXPECT_GT(untangle_labels(A, locator, A.V, A.F, only_local, local).folded_after, 0);
+}
+
+// The identity map with a disk of labels (about three rings) squeezed towards its centre to a twentieth of its
+// radius: nothing folds or collapses, but its triangles' preimages are 400 times too small (L2 stretch about 20),
+// as where the characteristics of an ear's tip all stall in one point.
+Eigen::MatrixXd squeezed_disk(const Surface& A) {
+  const Eigen::Vector3d c = Eigen::Vector3d(0.3, -1.0, 0.2).normalized();
+  return moved_disk(A, c, 3.0, [&](const Eigen::Vector3d& p) { return Eigen::Vector3d(c + 0.05 * (p - c)); });
+}
+
+TEST(Untangle, SmoothingSpreadsASqueezedPatch) {
+  const Surface A = make_shape(parse_shape_spec("sphere:size=1,center=0/0/0,res=48"), std::nullopt);
+  const SurfaceLocator locator(A);
+  const Eigen::MatrixXd damaged = squeezed_disk(A);
+  const StretchResult before = measure_stretch(A, A.V, A.F, damaged);
+  ASSERT_EQ(before.folded + before.collapsed, 0);
+  ASSERT_GT(before.max_sigma1, 15.0);
+  Eigen::MatrixXd labels = damaged;
+  const UntangleResult r = untangle_labels(A, locator, A.V, A.F, labels, enabled());
+  EXPECT_GT(r.stretched_before, 0);
+  EXPECT_EQ(r.stretched_after, 0);
+  const StretchResult after = measure_stretch(A, A.V, A.F, labels);
+  EXPECT_EQ(after.folded + after.collapsed, 0);
+  EXPECT_LT(after.max_sigma1, 0.5 * before.max_sigma1);
+  EXPECT_NEAR(after.coverage, 1.0, 0.02);
+  // Without the stretched seeds nothing is bad, and nothing moves.
+  UntangleOptions off = enabled();
+  off.stretch_seed = 0.0;
+  Eigen::MatrixXd untouched = damaged;
+  EXPECT_EQ(untangle_labels(A, locator, A.V, A.F, untouched, off).vertices_moved, 0);
+  EXPECT_TRUE(untouched == damaged);
 }
 
 TEST(Untangle, LeavesAGoodMapAlone) {
