@@ -124,7 +124,7 @@ void add_pipeline_options(CLI::App& cmd, PipelineOptions& o) {
          "source, then symmetric Dirichlet smoothing around them (on or off; the closest-point method is never "
          "repaired)")
       ->check(CLI::IsMember({"on", "off"}))
-      ->default_str("off");
+      ->default_str("on");
   cmd.add_option_function<std::string>(
          "--stalled-fill", [&o](const std::string& value) { o.stalled_fill = value; },
          "Label the target's vertices whose characteristic stalls (parts born during the morph) from the traced "

@@ -54,8 +54,9 @@ struct PipelineOptions {
   TransportOptions transport;  ///< upwind sweep tolerances (the sweep also labels the 4D mesh for seams)
   TraceOptions trace;          ///< characteristic tracing tolerances
   SeamOptions seams;           ///< topological and texture seam splitting of target.obj and slices (§8)
-  /// Repair of folded and collapsed triangles of B's map before the seam split (mesh/untangle.h; off by default,
-  /// --fold-repair on); the closest-point baseline is never repaired. Its seam threshold is seams.label_threshold.
+  /// Repair of folded, collapsed and stretched triangles of B's map before the seam split (mesh/untangle.h; on by
+  /// default, --fold-repair off); the closest-point baseline is never repaired. Its seam threshold is
+  /// seams.label_threshold.
   UntangleOptions untangle;
   /// Labels of B's vertices whose characteristic stalled, from the traced vertices around them (mesh/label_fill.h;
   /// trace method only): "auto" fills them when the fold repair is on, "on" always, "off" never. Measured on sphere

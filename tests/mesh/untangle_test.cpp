@@ -193,7 +193,9 @@ TEST(Untangle, DisabledOnlyCounts) {
   const SurfaceLocator locator(A);
   Eigen::MatrixXd labels = damaged_labels(A);
   const Eigen::MatrixXd original = labels;
-  const UntangleResult r = untangle_labels(A, locator, A.V, A.F, labels, UntangleOptions{});
+  UntangleOptions off;
+  off.enabled = false;
+  const UntangleResult r = untangle_labels(A, locator, A.V, A.F, labels, off);
   EXPECT_GT(r.folded_before, 0);
   EXPECT_EQ(r.folded_after, r.folded_before);
   EXPECT_EQ(r.collapsed_after, r.collapsed_before);
