@@ -139,6 +139,9 @@ class Untangler {
     UntangleResult result;
     const Eigen::Index nv = V_.rows(), nf = F_.rows();
     classify_all();
+    unit_normal_.resize(std::size_t(A_.F.rows()));
+    tbb::parallel_for(Eigen::Index(0), A_.F.rows(),
+                      [&](Eigen::Index f) { unit_normal_[std::size_t(f)] = face_normal(int(f)).normalized(); });
     auto count = [&](char which) { return std::int64_t(std::count(state_.begin(), state_.end(), which)); };
     result.folded_before = count(kFolded);
     result.collapsed_before = count(kCollapsed);
@@ -391,7 +394,7 @@ class Untangler {
   bool to_chart(int u, const Eigen::Vector3d& origin, const Eigen::Vector3d& axis, const Eigen::Vector3d& e1,
                 const Eigen::Vector3d& e2, Eigen::Vector2d& out) const {
     const Eigen::Vector3d q = labels_.row(u).transpose();
-    const Eigen::Vector3d n = face_normal(face_of_[std::size_t(u)]).normalized();
+    const Eigen::Vector3d& n = unit_normal_[std::size_t(face_of_[std::size_t(u)])];
     const double along = n.dot(axis);
     const Eigen::Vector3d x = q + ((origin - q).dot(axis) / along) * n - origin;
     out = Eigen::Vector2d(x.dot(e1), x.dot(e2));
@@ -421,7 +424,7 @@ class Untangler {
   /// of the plane back to A.
   bool chart(int v, Ring& ring) const {
     ring.origin = labels_.row(v).transpose();
-    const Eigen::Vector3d axis = face_normal(face_of_[std::size_t(v)]).normalized();
+    const Eigen::Vector3d axis = unit_normal_[std::size_t(face_of_[std::size_t(v)])];
     ring.e1 = axis.unitOrthogonal();
     ring.e2 = axis.cross(ring.e1);
     ring.a.clear();
@@ -663,7 +666,7 @@ class Untangler {
     // it along their own A normals (the inverse of the closest-point lift, as chart() does).
     Eigen::Vector3d axis = Eigen::Vector3d::Zero(), origin = Eigen::Vector3d::Zero();
     for (const int v : loop) {
-      axis += face_normal(face_of_[std::size_t(v)]).normalized();
+      axis += unit_normal_[std::size_t(face_of_[std::size_t(v)])];
       origin += labels_.row(v).transpose();
     }
     if (!(axis.norm() > 0.0)) return false;
@@ -791,6 +794,7 @@ class Untangler {
   const UntangleOptions& options_;
   const VertexFaces vf_;
   std::vector<char> state_, wall_, moved_, in_region_;
+  std::vector<Eigen::Vector3d> unit_normal_;  // A's outward unit face normals (every chart reads them)
   std::vector<int> face_of_, region_, frontier_;
   double collapse_area_ = 0.0, scale_ = 1.0, seam_length_ = 0.0;
 };
