@@ -92,7 +92,28 @@ TEST_F(Cli, UnknownOptionValues) {
   expect_rejected("sphere torus --source-projection nearest", "nearest");
   expect_rejected("sphere torus --seams sideways", "sideways");
   expect_rejected("sphere torus --zero-snap 0.9", "0.9");
+  expect_rejected("sphere torus --seam-threshold -0.5", "-0.5");
+  expect_rejected("sphere torus --fold-repair maybe", "maybe");
   expect_rejected("sphere torus --target-mesh " + (dir_ / "absent.obj").string(), "absent.obj");
+}
+
+// The fold repair runs by default and --fold-repair off skips it; --seam-threshold reaches the seam split.
+TEST_F(Cli, FoldRepairIsOnByDefaultAndSeamThresholdIsUsed) {
+  auto report = [&](const std::string& name, const std::string& options) {
+    const fs::path out = dir_ / name;
+    const CommandRun r = run_command("map sphere torus --voxels 16 --time-steps 4 -o " + out.string() + " " + options);
+    EXPECT_EQ(r.status, 0) << r.output;
+    std::ifstream in(out / "report.json");
+    return nlohmann::json::parse(in);
+  };
+  const nlohmann::json on = report("on", "--seam-threshold 0.1");
+  ASSERT_TRUE(on.contains("fold_repair"));
+  EXPECT_TRUE(on["fold_repair"]["enabled"].get<bool>());
+  EXPECT_DOUBLE_EQ(on["seams"]["threshold_diagonals"].get<double>(), 0.1);
+  EXPECT_DOUBLE_EQ(on["options"]["seam_threshold"].get<double>(), 0.1);
+  const nlohmann::json off = report("off", "--fold-repair off");
+  EXPECT_FALSE(off.contains("fold_repair"));
+  EXPECT_DOUBLE_EQ(off["seams"]["threshold_diagonals"].get<double>(), 0.25);
 }
 
 // Reads the `v` lines of an OBJ file.
