@@ -535,20 +535,23 @@ class Untangler {
   /// triangles out of its energy, so nothing else holds a side back).
   bool crosses_seam(int v, const Ring& ring, const Eigen::Vector2d& step) const {
     if (std::find(ring.seam.begin(), ring.seam.end(), char(1)) == ring.seam.end()) return false;
-    const Eigen::Vector3d to = lift(ring.origin, ring.e1, ring.e2, step, face_of_[std::size_t(v)]).point;
+    const SurfaceHit to = lift(ring.origin, ring.e1, ring.e2, step, face_of_[std::size_t(v)]);
     std::size_t k = 0;
     for (int j = vf_.begin(v); j < vf_.end(v); ++j, ++k) {
       if (!ring.seam[k]) continue;
       const int f = vf_.face(j);
       int i = 0;
       while (F_(f, i) != v) ++i;
-      const Eigen::Vector3d p = labels_.row(v).transpose(), a = labels_.row(F_(f, (i + 1) % 3)).transpose(),
-                            b = labels_.row(F_(f, (i + 2) % 3)).transpose();
-      auto positive = [&](const Eigen::Vector3d& x) {
-        const Eigen::Vector3d n = (a - x).cross(b - x);
-        return n.dot(face_normal(locator_.closest((x + a + b) / 3.0).face)) > 0.0;
+      const int u = F_(f, (i + 1) % 3), w = F_(f, (i + 2) % 3);
+      const Eigen::Vector3d a = labels_.row(u).transpose(), b = labels_.row(w).transpose();
+      // A's normal for a triangle this large: the sum of the unit normals at its corners. The closest face to its
+      // centroid, which lies deep inside A, is a search that visits most of A's faces (on sphere -> torus, 10 s).
+      const Eigen::Vector3d corners =
+          unit_normal_[std::size_t(face_of_[std::size_t(u)])] + unit_normal_[std::size_t(face_of_[std::size_t(w)])];
+      auto positive = [&](const Eigen::Vector3d& x, int face) {
+        return (a - x).cross(b - x).dot(corners + unit_normal_[std::size_t(face)]) > 0.0;
       };
-      if (positive(p) && !positive(to)) return true;
+      if (positive(labels_.row(v).transpose(), face_of_[std::size_t(v)]) && !positive(to.point, to.face)) return true;
     }
     return false;
   }
