@@ -849,6 +849,8 @@ PipelineResult run_pipeline(const PipelineOptions& options) {
         {"moves", untangle.moves},
         {"rounds", untangle.rounds},
         {"sweeps", untangle.sweeps},
+        {"smoothing_sweeps", untangle.smoothing_sweeps},
+        {"smoothing_moves", untangle.smoothing_moves},
         {"seconds", untangle.seconds},
         {"note",
          "counts on B before the seam split (seam triangles, whose labels span the seam threshold, not counted); "

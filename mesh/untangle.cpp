@@ -139,6 +139,8 @@ class Untangler {
     UntangleResult result;
     const Eigen::Index nv = V_.rows(), nf = F_.rows();
     classify_all();
+    shapes_.resize(std::size_t(vf_.end(int(nv) - 1)));
+    shape_state_.assign(std::size_t(nv), 0);
     unit_normal_.resize(std::size_t(A_.F.rows()));
     tbb::parallel_for(Eigen::Index(0), A_.F.rows(),
                       [&](Eigen::Index f) { unit_normal_[std::size_t(f)] = face_normal(int(f)).normalized(); });
@@ -252,6 +254,7 @@ class Untangler {
       const std::int64_t moves =
           run_sweep(classes, active, &next, [&](int v, Ring& ring) { return smooth_vertex(v, ring); });
       result.smoothing_moves += moves;
+      ++result.smoothing_sweeps;
       if (moves == 0) break;
       active.swap(next);
       std::fill(next.begin(), next.end(), 0);
@@ -484,24 +487,17 @@ class Untangler {
   /// True when v moved by more than a thousandth of its ring's size (smaller steps are convergence).
   bool smooth_vertex(int v, Ring& ring) {
     if (!chart(v, ring)) return false;
+    if (!shapes_of(v)) return false;
     ring.inverse_shape.clear();
     ring.shape_det.clear();
     ring.shape_area.clear();
     ring.active.clear();
     double ring_area = 0.0;
     for (int j = vf_.begin(v); j < vf_.end(v); ++j) {
-      const int f = vf_.face(j);
-      int k = 0;
-      while (F_(f, k) != v) ++k;
-      const Eigen::Vector3d e = scale_ * (V_.row(F_(f, (k + 1) % 3)) - V_.row(v)).transpose();
-      const Eigen::Vector3d g = scale_ * (V_.row(F_(f, (k + 2) % 3)) - V_.row(v)).transpose();
-      const double length = e.norm(), cross = e.cross(g).norm();
-      if (!(length > 0.0) || !(cross > 0.0)) return false;
-      Eigen::Matrix2d P;
-      P << length, e.dot(g) / length, 0.0, cross / length;
-      ring.inverse_shape.push_back(P.inverse());
-      ring.shape_det.push_back(P.determinant());
-      ring.shape_area.push_back(0.5 * cross);
+      const Shape& shape = shapes_[std::size_t(j)];
+      ring.inverse_shape.push_back(shape.inverse);
+      ring.shape_det.push_back(shape.det);
+      ring.shape_area.push_back(shape.area);
       const std::size_t i = ring.active.size();
       // Triangles the untangling could not right are left out, so that their neighbours can still spread.
       ring.active.push_back(area(ring.a[i], ring.b[i]) > 0.0 && !ring.seam[i]);
@@ -525,7 +521,7 @@ class Untangler {
       if (sliver) continue;
       if (crosses_seam(v, ring, step)) continue;
       move(v, ring, step);
-      return step.squaredNorm() > 1e-6 * ring_area / double(ring.a.size());
+      return step.squaredNorm() > options_.smoothing_tolerance * ring_area / double(ring.a.size());
     }
     return false;
   }
@@ -554,6 +550,32 @@ class Untangler {
       if (positive(labels_.row(v).transpose(), face_of_[std::size_t(v)]) && !positive(to.point, to.face)) return true;
     }
     return false;
+  }
+
+  /// The shapes of v's triangles on B (scaled to A's area) in their own planes, for the smoothing's energy: computed
+  /// at v's first visit (a vertex is smoothed hundreds of times; only v's entries are written, so a colour class can
+  /// run in parallel). False when one of them is degenerate.
+  bool shapes_of(int v) {
+    char& state = shape_state_[std::size_t(v)];
+    if (state == 0) {
+      state = 1;
+      for (int j = vf_.begin(v); j < vf_.end(v) && state == 1; ++j) {
+        const int f = vf_.face(j);
+        int k = 0;
+        while (F_(f, k) != v) ++k;
+        const Eigen::Vector3d e = scale_ * (V_.row(F_(f, (k + 1) % 3)) - V_.row(v)).transpose();
+        const Eigen::Vector3d g = scale_ * (V_.row(F_(f, (k + 2) % 3)) - V_.row(v)).transpose();
+        const double length = e.norm(), cross = e.cross(g).norm();
+        if (!(length > 0.0) || !(cross > 0.0)) {
+          state = 2;
+          break;
+        }
+        Eigen::Matrix2d P;
+        P << length, e.dot(g) / length, 0.0, cross / length;
+        shapes_[std::size_t(j)] = {P.inverse(), P.determinant(), 0.5 * cross};
+      }
+    }
+    return state == 1;
   }
 
   /// Lays out again, in one chart of A, each cluster of bad triangles with rings around it (see
@@ -798,6 +820,12 @@ class Untangler {
   const VertexFaces vf_;
   std::vector<char> state_, wall_, moved_, in_region_;
   std::vector<Eigen::Vector3d> unit_normal_;  // A's outward unit face normals (every chart reads them)
+  struct Shape {
+    Eigen::Matrix2d inverse;  // P^-1, P a triangle's B edges from the vertex in its own plane
+    double det = 0.0, area = 0.0;
+  };
+  std::vector<Shape> shapes_;      // per entry of vf_ (a vertex's triangles), once shape_state_ is 1
+  std::vector<char> shape_state_;  // per vertex: 0 not computed, 1 computed, 2 a triangle degenerate
   std::vector<int> face_of_, region_, frontier_;
   double collapse_area_ = 0.0, scale_ = 1.0, seam_length_ = 0.0;
 };
