@@ -6,7 +6,7 @@
 # The change thresholds are each row's own in Table II (1e-5, 1.2e-4 for the Buddha, 2.5e-3 for cow -> horse): they
 # stop the Gauss-Seidel comparison (`compare-solvers`) and change nothing in the map's own converged solve.
 # The fold repair (on by default since 2026-12-06) is off: Table II times the paper's pipeline, which has no such
-# stage (README, "Batch runs and Table II"; the repair adds 0.2-0.6 s to these jobs and 1.9 s to cow -> horse).
+# stage (README, "Batch runs and Table II"; the repair adds 0.2-0.6 s to these jobs and 1.3 s to cow -> horse).
 # shellcheck disable=SC2154  # $models: set by the script that sources this one
 table2_jobs() {
   cat <<JOBS
