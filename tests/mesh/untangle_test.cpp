@@ -202,19 +202,24 @@ TEST(Untangle, DisabledOnlyCounts) {
   EXPECT_TRUE(labels == original);
 }
 
+// Folds and collapses (the untangling), and a squeezed patch (the smoothing's stretched seeds and its rounds).
 TEST(Untangle, ResultDoesNotDependOnTheThreadCount) {
-  const Surface A = unit_sphere();
-  const SurfaceLocator locator(A);
-  Eigen::MatrixXd one = damaged_labels(A), two = one;
-  {
-    const tbb::global_control limit(tbb::global_control::max_allowed_parallelism, 1);
-    untangle_labels(A, locator, A.V, A.F, one, enabled());
+  const Surface coarse = unit_sphere();
+  const Surface fine = make_shape(parse_shape_spec("sphere:size=1,center=0/0/0,res=48"), std::nullopt);
+  for (const auto& [A, damaged] : {std::pair{&coarse, damaged_labels(coarse)}, std::pair{&fine, squeezed_disk(fine)}}) {
+    const SurfaceLocator locator(*A);
+    Eigen::MatrixXd one = damaged, two = damaged;
+    {
+      const tbb::global_control limit(tbb::global_control::max_allowed_parallelism, 1);
+      untangle_labels(*A, locator, A->V, A->F, one, enabled());
+    }
+    {
+      const tbb::global_control limit(tbb::global_control::max_allowed_parallelism, 2);
+      untangle_labels(*A, locator, A->V, A->F, two, enabled());
+    }
+    EXPECT_FALSE(one == damaged);
+    EXPECT_TRUE(one == two);
   }
-  {
-    const tbb::global_control limit(tbb::global_control::max_allowed_parallelism, 2);
-    untangle_labels(A, locator, A.V, A.F, two, enabled());
-  }
-  EXPECT_TRUE(one == two);
 }
 
 TEST(Untangle, RejectsLabelsOfTheWrongShape) {
