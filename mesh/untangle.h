@@ -4,10 +4,10 @@
 // move on A: first each cluster of them that is a disk is laid out again in one chart (a Tutte embedding with B's
 // mean value weights inside its fixed boundary, Floater 2003), then each vertex with an inverted or flat triangle to
 // where its smallest triangle (in the tangent plane of A at its label) is largest (local optimisation untangling,
-// Freitag and Plassmann 2000), the region growing while that rights triangles; then the region and a few more rings
-// descend the symmetric Dirichlet energy of their triangles, which keeps every positive triangle positive and spreads
-// the squeezed patches. Where B has handles that the source lacks, some folds are forced (README, Riemann-Hurwitz) and
-// stay.
+// Freitag and Plassmann 2000), the region growing while that rights triangles; then the region, the triangles
+// stretched beyond UntangleOptions::stretch_seed (though not folded) and a few more rings around both descend the
+// symmetric Dirichlet energy of their triangles, which keeps every positive triangle positive and spreads the squeezed
+// patches. Where B has handles that the source lacks, some folds are forced (README, Riemann-Hurwitz) and stay.
 #pragma once
 
 #include <Eigen/Core>
