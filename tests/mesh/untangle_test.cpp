@@ -178,6 +178,67 @@ TEST(Untangle, SmoothingSpreadsASqueezedPatch) {
   EXPECT_TRUE(untouched == damaged);
 }
 
+// A cap of labels turned half a turn about its centre (its rim's triangles span the seam threshold: a seam), then a
+// disk across the rim squeezed to a twentieth: stretched triangles whose corners lie on seam triangles.
+Eigen::MatrixXd squeezed_across_a_seam(const Surface& A) {
+  const double h = mean_edge(A), R = 8.0;
+  const Eigen::Vector3d c = Eigen::Vector3d(0.3, -1.0, 0.2).normalized();
+  const Eigen::MatrixXd turned =
+      moved_disk(A, c, R, [&](const Eigen::Vector3d& p) { return Eigen::Vector3d(2.0 * c.dot(p) * c - p); });
+  const Eigen::Vector3d e = (c + 0.75 * R * h * c.unitOrthogonal()).normalized();
+  const Eigen::Vector3d centre = 2.0 * c.dot(e) * c - e;
+  Eigen::MatrixXd labels = turned;
+  for (Eigen::Index i = 0; i < A.V.rows(); ++i)
+    if ((A.V.row(i).transpose() - e).norm() < 0.3 * R * h)
+      labels.row(i) = (centre + 0.05 * (turned.row(i).transpose() - centre)).normalized().transpose();
+  return labels;
+}
+
+// Whether triangle f's labels face along A's outward normal, taken as the repair's seam guard takes it for a triangle
+// this large: the sum of the unit normals of A's faces nearest its corners.
+bool faces_out(const Surface& A, const SurfaceLocator& locator, const Eigen::MatrixXd& labels, Eigen::Index f) {
+  const Eigen::Vector3d p0 = labels.row(A.F(f, 0)), p1 = labels.row(A.F(f, 1)), p2 = labels.row(A.F(f, 2));
+  Eigen::Vector3d normal = Eigen::Vector3d::Zero();
+  for (const Eigen::Vector3d& p : {p0, p1, p2}) {
+    const int face = locator.closest(p).face;
+    const Eigen::Vector3d a0 = A.V.row(A.F(face, 0)), a1 = A.V.row(A.F(face, 1)), a2 = A.V.row(A.F(face, 2));
+    normal += (a1 - a0).cross(a2 - a0).normalized();
+  }
+  return (p1 - p0).cross(p2 - p0).dot(normal) > 0.0;
+}
+
+// The triangles whose labels span the seam threshold.
+std::vector<Eigen::Index> seam_triangles(const Surface& A, const Eigen::MatrixXd& labels) {
+  const double threshold = UntangleOptions{}.seam_threshold * bounding_box(A.V).diagonal().norm();
+  std::vector<Eigen::Index> seams;
+  for (Eigen::Index f = 0; f < A.F.rows(); ++f) {
+    const Eigen::Vector3d p0 = labels.row(A.F(f, 0)), p1 = labels.row(A.F(f, 1)), p2 = labels.row(A.F(f, 2));
+    if ((p1 - p0).norm() > threshold || (p2 - p1).norm() > threshold || (p0 - p2).norm() > threshold)
+      seams.push_back(f);
+  }
+  return seams;
+}
+
+TEST(Untangle, SmoothingSpreadsStretchedTrianglesAcrossASeamWithoutCrossingIt) {
+  const Surface A = make_shape(parse_shape_spec("sphere:size=1,center=0/0/0,res=48"), std::nullopt);
+  const SurfaceLocator locator(A);
+  const Eigen::MatrixXd damaged = squeezed_across_a_seam(A);
+  const std::vector<Eigen::Index> seams = seam_triangles(A, damaged);
+  ASSERT_GT(seams.size(), 20u);
+  const StretchResult stretch_before = measure_stretch(A, A.V, A.F, damaged);
+  ASSERT_GT(stretch_before.max_sigma1, 20.0);
+
+  Eigen::MatrixXd labels = damaged;
+  const UntangleResult r = untangle_labels(A, locator, A.V, A.F, labels, enabled());
+  EXPECT_GT(r.seam_triangles, 20);
+  EXPECT_GT(r.stretched_before, 10);
+  EXPECT_EQ(r.stretched_after, 0);
+  EXPECT_LT(measure_stretch(A, A.V, A.F, labels).max_sigma1, 0.1 * stretch_before.max_sigma1);
+  // No side of the seam crossed the other: every seam triangle that faced out on A still does.
+  for (const Eigen::Index f : seams)
+    if (faces_out(A, locator, damaged, f)) EXPECT_TRUE(faces_out(A, locator, labels, f)) << "seam triangle " << f;
+}
+
 TEST(Untangle, LeavesAGoodMapAlone) {
   const Surface A = unit_sphere();
   const SurfaceLocator locator(A);
