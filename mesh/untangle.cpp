@@ -139,11 +139,6 @@ class Untangler {
     UntangleResult result;
     const Eigen::Index nv = V_.rows(), nf = F_.rows();
     classify_all();
-    shapes_.resize(std::size_t(vf_.end(int(nv) - 1)));
-    shape_state_.assign(std::size_t(nv), 0);
-    unit_normal_.resize(std::size_t(A_.F.rows()));
-    tbb::parallel_for(Eigen::Index(0), A_.F.rows(),
-                      [&](Eigen::Index f) { unit_normal_[std::size_t(f)] = face_normal(int(f)).normalized(); });
     auto count = [&](char which) { return std::int64_t(std::count(state_.begin(), state_.end(), which)); };
     result.folded_before = count(kFolded);
     result.collapsed_before = count(kCollapsed);
@@ -162,6 +157,11 @@ class Untangler {
         for (int k = 0; k < 3; ++k) wall_[std::size_t(F_(f, k))] = 1;
     moved_.assign(std::size_t(nv), 0);
     face_of_.resize(std::size_t(nv));
+    shapes_.resize(vf_.faces.size());
+    shape_state_.assign(std::size_t(nv), 0);
+    unit_normal_.resize(std::size_t(A_.F.rows()));
+    tbb::parallel_for(Eigen::Index(0), A_.F.rows(),
+                      [&](Eigen::Index f) { unit_normal_[std::size_t(f)] = face_normal(int(f)).normalized(); });
     const std::vector<SurfaceHit> hits = locator_.closest_all(labels_);
     for (Eigen::Index v = 0; v < nv; ++v) face_of_[std::size_t(v)] = hits[std::size_t(v)].face;
     scale_ = std::sqrt(surface_area(A_.V, A_.F) / surface_area(V_, F_.cast<int>()));
@@ -450,8 +450,12 @@ class Untangler {
     return ok;
   }
 
-  void move(int v, const Ring& ring, const Eigen::Vector2d& x) {
-    const SurfaceHit hit = lift(ring.origin, ring.e1, ring.e2, x, face_of_[std::size_t(v)]);
+  /// The point of A for v's chart point x (see lift).
+  SurfaceHit lifted(int v, const Ring& ring, const Eigen::Vector2d& x) const {
+    return lift(ring.origin, ring.e1, ring.e2, x, face_of_[std::size_t(v)]);
+  }
+
+  void move(int v, const SurfaceHit& hit) {
     labels_.row(v) = hit.point.transpose();
     face_of_[std::size_t(v)] = hit.face;
     moved_[std::size_t(v)] = 1;
@@ -480,7 +484,7 @@ class Untangler {
     int inverted_after = 0;
     for (std::size_t k = 0; k < ring.a.size(); ++k) inverted_after += area(ring.a[k] - x, ring.b[k] - x) <= 0.0;
     if (inverted_after > inverted) return false;
-    move(v, ring, x);
+    move(v, lifted(v, ring, x));
     return true;
   }
 
@@ -519,19 +523,18 @@ class Untangler {
         sliver = after > 0.0 && after < options_.flat_fraction * ring_area / double(ring.a.size());
       }
       if (sliver) continue;
-      if (crosses_seam(v, ring, step)) continue;
-      move(v, ring, step);
+      const SurfaceHit to = lifted(v, ring, step);
+      if (crosses_seam(v, ring, to)) continue;
+      move(v, to);
       return step.squaredNorm() > options_.smoothing_tolerance * ring_area / double(ring.a.size());
     }
     return false;
   }
 
-  /// Whether moving v by `step` in its chart turns one of its seam triangles, positive on A, over: v would cross
-  /// the far side's edge, and the two sides of the seam would cover the same part of A (the smoothing leaves seam
+  /// Whether moving v to `to` (its step lifted to A) turns one of its seam triangles, positive on A, over: v would
+  /// cross the far side's edge, and the two sides of the seam would cover the same part of A (the smoothing leaves seam
   /// triangles out of its energy, so nothing else holds a side back).
-  bool crosses_seam(int v, const Ring& ring, const Eigen::Vector2d& step) const {
-    if (std::find(ring.seam.begin(), ring.seam.end(), char(1)) == ring.seam.end()) return false;
-    const SurfaceHit to = lift(ring.origin, ring.e1, ring.e2, step, face_of_[std::size_t(v)]);
+  bool crosses_seam(int v, const Ring& ring, const SurfaceHit& to) const {
     std::size_t k = 0;
     for (int j = vf_.begin(v); j < vf_.end(v); ++j, ++k) {
       if (!ring.seam[k]) continue;
