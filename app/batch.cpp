@@ -110,26 +110,33 @@ std::string md_cell(const std::string& text) {
   return cell;
 }
 
-// The cells of a row in the order of kColumns (shared by the CSV and Markdown writers).
-const std::vector<std::string> kColumns = {"job",
-                                           "status",
-                                           "tets",
-                                           "time_steps",
-                                           "diffusion_iterations",
-                                           "diffusion_seconds",
-                                           "diffusion_conv",
-                                           "solve_backend",
-                                           "solve_iterations",
-                                           "solve_seconds",
-                                           "solve_residual",
-                                           "label_passes",
-                                           "label_seconds",
-                                           "map_seconds",
-                                           "total_seconds",
-                                           "cpu_seconds",
-                                           "peak_memory_bytes",
-                                           "warnings",
-                                           "error"};
+// The summary's columns: CSV name, Markdown heading and Markdown alignment, in the order of cells() (one list for
+// both writers, so that the two tables cannot drift apart: summary.md once lacked the warnings heading).
+struct Column {
+  const char* csv;
+  const char* heading;
+  const char* align;
+};
+const std::vector<Column> kColumns = {{"job", "job", "---"},
+                                      {"status", "status", "---"},
+                                      {"tets", "tets", "--:"},
+                                      {"time_steps", "time steps", "--:"},
+                                      {"diffusion_iterations", "diffusion iters", "--:"},
+                                      {"diffusion_seconds", "diffusion s", "--:"},
+                                      {"diffusion_conv", "diffusion conv", "--:"},
+                                      {"solve_backend", "solver", "---"},
+                                      {"solve_iterations", "solve iters", "--:"},
+                                      {"solve_seconds", "solve s", "--:"},
+                                      {"solve_residual", "solve residual", "--:"},
+                                      {"label_passes", "label passes", "--:"},
+                                      {"label_seconds", "label s", "--:"},
+                                      {"map_seconds", "map s", "--:"},
+                                      {"total_seconds", "total s", "--:"},
+                                      {"cpu_seconds", "cpu s", "--:"},
+                                      {"peak_memory_bytes", "peak memory", "--:"},
+                                      {"warnings", "warnings", "---"},
+                                      {"error", "error", "---"}};
+constexpr std::size_t kPeakMemoryColumn = 16;
 
 std::vector<std::string> cells(const SummaryRow& r) {
   return {r.job,
@@ -525,7 +532,7 @@ SummaryRow summary_row(const std::string& job, const std::string& report_json) {
 
 std::string summary_csv(const std::vector<SummaryRow>& rows) {
   std::string text;
-  for (std::size_t c = 0; c < kColumns.size(); ++c) text += (c ? "," : "") + kColumns[c];
+  for (std::size_t c = 0; c < kColumns.size(); ++c) text += std::string(c ? "," : "") + kColumns[c].csv;
   text += '\n';
   for (const SummaryRow& row : rows) {
     const std::vector<std::string> values = cells(row);
@@ -536,14 +543,16 @@ std::string summary_csv(const std::vector<SummaryRow>& rows) {
 }
 
 std::string summary_markdown(const std::vector<SummaryRow>& rows) {
-  std::string text =
-      "| job | status | tets | time steps | diffusion iters | diffusion s | diffusion conv | solver | solve iters | "
-      "solve s | solve residual | label passes | label s | map s | total s | cpu s | peak memory | error |\n"
-      "|---|---|--:|--:|--:|--:|--:|---|--:|--:|--:|--:|--:|--:|--:|--:|--:|---|\n";
+  std::string heading = "|", rule = "|";
+  for (const Column& c : kColumns) {
+    heading += std::string(" ") + c.heading + " |";
+    rule += std::string(c.align) + "|";
+  }
+  std::string text = heading + "\n" + rule + "\n";
   for (const SummaryRow& row : rows) {
     std::vector<std::string> values = cells(row);
     if (row.peak_memory_bytes)
-      values[16] = number(double(*row.peak_memory_bytes) / (1024.0 * 1024.0 * 1024.0), 3) + " GiB";
+      values[kPeakMemoryColumn] = number(double(*row.peak_memory_bytes) / (1024.0 * 1024.0 * 1024.0), 3) + " GiB";
     text += "|";
     for (const std::string& v : values) text += " " + md_cell(v) + " |";
     text += '\n';

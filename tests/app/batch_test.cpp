@@ -242,6 +242,30 @@ TEST_F(Batch, SummaryRowTakesDiffusionAndSolveFromEitherSide) {
   EXPECT_EQ(cell(csv, 1, "warnings"), row.warnings);
   EXPECT_EQ(cell(csv, 2, "warnings"), "");
   EXPECT_NE(summary_markdown({row, failed}).find("| f | failed |"), std::string::npos);
+  // Every Markdown line has the heading's cells, and the warning sits under "warnings" (the heading once lacked it,
+  // so each warning stood under "error").
+  std::istringstream md(summary_markdown({row, failed}));
+  std::vector<std::vector<std::string>> table;
+  for (std::string line; std::getline(md, line);) {
+    std::vector<std::string> cells;
+    std::string cell;
+    for (std::size_t i = 1; i < line.size(); ++i) {  // no cell of these rows holds an escaped '|'
+      if (line[i] == '|') {
+        cells.push_back(cell.size() >= 2 ? cell.substr(1, cell.size() - 2) : cell);
+        cell.clear();
+      } else {
+        cell += line[i];
+      }
+    }
+    table.push_back(cells);
+  }
+  ASSERT_EQ(table.size(), 4u);
+  for (const auto& line : table) EXPECT_EQ(line.size(), table[0].size());
+  const auto warnings = std::find(table[0].begin(), table[0].end(), "warnings");
+  ASSERT_NE(warnings, table[0].end());
+  EXPECT_EQ(table[2][std::size_t(warnings - table[0].begin())], row.warnings);
+  EXPECT_EQ(table[0].back(), "error");
+  EXPECT_EQ(table[3].back(), failed.error);
 }
 
 TEST_F(Batch, BadManifestRunsNothing) {
