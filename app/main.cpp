@@ -117,8 +117,12 @@ int main(int argc, char** argv) {
       return 0;
     }
     if (stretch->parsed()) {
-      std::cout << morphmap::stretch_json(morphmap::stretch_of_files(stretch_target, stretch_labels, stretch_source))
-                << '\n';
+      const morphmap::StretchInputs in = morphmap::read_stretch_inputs(stretch_target, stretch_labels, stretch_source);
+      if (in.source_fitted_to_target)
+        std::cerr << "morphmap: note: " << stretch_source << " fitted to " << stretch_target << "'s box, as "
+                  << in.source_shape << ": no report.json of the map beside it, whose inputs.source_shape places it "
+                  << "as the map did\n";
+      std::cout << morphmap::stretch_json(morphmap::measure_stretch(in.A, in.B.V, in.B.F, in.preimages)) << '\n';
       return 0;
     }
     const morphmap::PipelineResult result = morphmap::run_pipeline(options);

@@ -77,7 +77,11 @@ std::string format_time(double t) {
   return s.str();
 }
 
-void load_inputs(const PipelineOptions& options, Surface& A, Surface& B, SurfaceCheck& check_a, SurfaceCheck& check_b) {
+// A built-in shape's spec as placed (`a_shape`, `b_shape`: empty for a mesh) goes to report.json, so that `morphmap
+// stretch` can rebuild the very shape the map used: fitted to target.obj's box instead, a sphere came out 0.5%
+// larger than the one fitted to the built-in torus.
+void load_inputs(const PipelineOptions& options, Surface& A, Surface& B, SurfaceCheck& check_a, SurfaceCheck& check_b,
+                 std::string& a_shape, std::string& b_shape) {
   const bool a_builtin = is_builtin_shape(options.source), b_builtin = is_builtin_shape(options.target);
   // Parse both specs first so that a bad spec is reported before any file is read.
   std::optional<ShapeSpec> a_spec, b_spec;
@@ -85,8 +89,18 @@ void load_inputs(const PipelineOptions& options, Surface& A, Surface& B, Surface
   if (b_builtin) b_spec = parse_shape_spec(options.target);
   if (!b_builtin) B = read_surface(options.target);
   if (!a_builtin) A = read_surface(options.source);
-  if (b_builtin) B = make_shape(*b_spec, a_builtin ? std::nullopt : std::optional(bounding_box(A.V)));
-  if (a_builtin) A = make_shape(*a_spec, std::optional(bounding_box(B.V)));
+  if (b_builtin) {
+    const ShapeSpec placed = resolve_shape_spec(*b_spec, a_builtin ? std::nullopt : std::optional(bounding_box(A.V)));
+    B = make_shape(placed, std::nullopt);
+    B.name = shape_spec_string(*b_spec);  // messages name the shape as given
+    b_shape = shape_spec_string(placed);
+  }
+  if (a_builtin) {
+    const ShapeSpec placed = resolve_shape_spec(*a_spec, std::optional(bounding_box(B.V)));
+    A = make_shape(placed, std::nullopt);
+    A.name = shape_spec_string(*a_spec);
+    a_shape = shape_spec_string(placed);
+  }
   check_a = validate_surface(A, true);
   check_b = validate_surface(B, true);
   if (!options.texture.empty()) {
@@ -276,14 +290,49 @@ nlohmann::json seams_json(const SeamResult& r, const SeamOptions& o) {
 
 }  // namespace
 
+namespace {
+
+// The source shape `map` placed for `source` (report.json's inputs.source_shape beside `target`), if that report is
+// there, readable and of the same source.
+std::optional<ShapeSpec> mapped_source_shape(const std::string& target, const std::string& source) {
+  const std::filesystem::path report_path = std::filesystem::path(target).parent_path() / "report.json";
+  std::ifstream in(report_path);
+  if (!in) return std::nullopt;
+  const nlohmann::json report = nlohmann::json::parse(in, nullptr, false);
+  if (report.is_discarded() || !report.is_object()) return std::nullopt;
+  const nlohmann::json::json_pointer source_key("/inputs/source"), shape_key("/inputs/source_shape");
+  if (!report.contains(source_key) || !report.contains(shape_key) || report.at(source_key) != source ||
+      !report.at(shape_key).is_string())
+    return std::nullopt;
+  try {
+    return parse_shape_spec(report.at(shape_key).get<std::string>());
+  } catch (const InvalidInput&) {
+    return std::nullopt;
+  }
+}
+
+}  // namespace
+
 StretchInputs read_stretch_inputs(const std::string& target, const std::string& labels, const std::string& source) {
   StretchInputs inputs;
   Surface& B = inputs.B;
   Surface& A = inputs.A;
   B = read_surface(target);
   validate_surface(B, false);
-  A = is_builtin_shape(source) ? make_shape(parse_shape_spec(source), std::optional(bounding_box(B.V)))
-                               : read_surface(source);
+  if (is_builtin_shape(source)) {
+    const ShapeSpec spec = parse_shape_spec(source);
+    ShapeSpec placed = spec;
+    if (!spec.center || !spec.size) {
+      const std::optional<ShapeSpec> mapped = mapped_source_shape(target, source);
+      inputs.source_fitted_to_target = !mapped;
+      placed = mapped ? *mapped : resolve_shape_spec(spec, std::optional(bounding_box(B.V)));
+    }
+    A = make_shape(placed, std::nullopt);
+    A.name = shape_spec_string(spec);
+    inputs.source_shape = shape_spec_string(placed);
+  } else {
+    A = read_surface(source);
+  }
   validate_surface(A, true);
   std::ifstream in(labels);
   if (!in) throw IoError(labels + ": cannot open file");
@@ -354,7 +403,8 @@ PipelineResult run_pipeline(const PipelineOptions& options) {
   auto start = Clock::now();
   Surface A, B;
   SurfaceCheck input_check_a, input_check_b;
-  load_inputs(options, A, B, input_check_a, input_check_b);
+  std::string source_shape, target_shape;
+  load_inputs(options, A, B, input_check_a, input_check_b, source_shape, target_shape);
   Frame frame_a, frame_b;
   if (options.align == "bbox") {
     frame_a = normalise(A);
@@ -739,6 +789,8 @@ PipelineResult run_pipeline(const PipelineOptions& options) {
   result.fallbacks = options.method == "trace" ? traced_total.stalled + traced_total.invalid : transport.fallbacks();
 
   report["inputs"] = {{"source", options.source}, {"target", options.target}};
+  if (!source_shape.empty()) report["inputs"]["source_shape"] = source_shape;
+  if (!target_shape.empty()) report["inputs"]["target_shape"] = target_shape;
   report["options"] = {{"voxels", options.morph.voxels},
                        {"voxel_size", morph.field.voxel_size},
                        {"padding", options.morph.padding},

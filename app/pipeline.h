@@ -96,14 +96,19 @@ long long parse_memory_size(const std::string& text);
 /// Stretch figures as report.json and `morphmap stretch` print them.
 std::string stretch_json(const StretchResult& stretch);
 
-/// `morphmap stretch`: reads TARGET (a mesh file), one preimage per vertex from LABELS, and SOURCE (a file
-/// or a built-in shape, fitted to the target's box like `map` does) and returns the stretch figures.
+/// `morphmap stretch`: reads TARGET (a mesh file), one preimage per vertex from LABELS, and SOURCE (a file or a
+/// built-in shape, placed as read_stretch_inputs says) and returns the stretch figures.
 StretchResult stretch_of_files(const std::string& target, const std::string& labels, const std::string& source);
 
-/// What `morphmap stretch` and `render --heat` read: SOURCE (A), TARGET (B) and one preimage per vertex of B.
+/// What `morphmap stretch` and `render --heat` read: SOURCE (A), TARGET (B) and one preimage per vertex of B. A
+/// built-in SOURCE without centre or size is placed where `map` placed it when TARGET's folder holds the map's
+/// report.json (its inputs.source_shape, for the same inputs.source), else fitted to TARGET's box, which is the
+/// extracted target's and so not quite the box `map` fitted it to (`source_fitted_to_target`).
 struct StretchInputs {
   Surface A, B;
-  Eigen::MatrixXd preimages;  ///< #B.V by 3, points of A
+  Eigen::MatrixXd preimages;             ///< #B.V by 3, points of A
+  std::string source_shape;              ///< a built-in SOURCE's spec as placed (empty for a file)
+  bool source_fitted_to_target = false;  ///< placed by TARGET's box, for want of the map's report.json
 };
 StretchInputs read_stretch_inputs(const std::string& target, const std::string& labels, const std::string& source);
 

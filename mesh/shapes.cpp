@@ -120,7 +120,7 @@ void append_torus(const Eigen::Vector3d& center, double major, double minor, int
   }
 }
 
-std::string spec_string(const ShapeSpec& spec) {
+std::string shape_spec_string_of(const ShapeSpec& spec) {
   const ShapeSpec defaults;
   std::vector<std::string> items;
   if (spec.size) items.push_back("size=" + format_number(*spec.size));
@@ -221,19 +221,26 @@ ShapeSpec parse_shape_spec(const std::string& arg) {
   return spec;
 }
 
-Surface make_shape(const ShapeSpec& spec, const std::optional<Eigen::AlignedBox3d>& fit) {
-  const std::string name = spec_string(spec);
-  check_spec(name, spec);
+ShapeSpec resolve_shape_spec(const ShapeSpec& spec, const std::optional<Eigen::AlignedBox3d>& fit) {
   const bool use_fit = fit.has_value() && !fit->isEmpty();
-  const Eigen::Vector3d center =
-      spec.center ? *spec.center : (use_fit ? Eigen::Vector3d(fit->center()) : Eigen::Vector3d::Zero());
-  double size = 1.0;
-  if (spec.size) {
-    size = *spec.size;
-  } else if (use_fit) {
-    size = 0.5 * fit->sizes().maxCoeff();
-    if (!(size > 0.0)) throw InvalidInput("shape '" + name + "': the box to fit has zero size");
+  ShapeSpec placed = spec;
+  if (!placed.center) placed.center = use_fit ? Eigen::Vector3d(fit->center()) : Eigen::Vector3d::Zero();
+  if (!placed.size) {
+    placed.size = use_fit ? 0.5 * fit->sizes().maxCoeff() : 1.0;
+    if (!(*placed.size > 0.0))
+      throw InvalidInput("shape '" + shape_spec_string_of(spec) + "': the box to fit has zero size");
   }
+  return placed;
+}
+
+std::string shape_spec_string(const ShapeSpec& spec) { return shape_spec_string_of(spec); }
+
+Surface make_shape(const ShapeSpec& spec, const std::optional<Eigen::AlignedBox3d>& fit) {
+  const std::string name = shape_spec_string_of(spec);
+  check_spec(name, spec);
+  const ShapeSpec placed = resolve_shape_spec(spec, fit);
+  const Eigen::Vector3d center = *placed.center;
+  const double size = *placed.size;
 
   std::vector<Eigen::Vector3d> positions;
   std::vector<Eigen::Vector3i> faces;

@@ -29,6 +29,13 @@ bool is_builtin_shape(const std::string& arg);
 /// Parses a spec string; throws InvalidInput naming the spec and the problem.
 ShapeSpec parse_shape_spec(const std::string& arg);
 
+/// The spec with the centre and size make_shape(spec, fit) places the shape at, both explicit.
+ShapeSpec resolve_shape_spec(const ShapeSpec& spec, const std::optional<Eigen::AlignedBox3d>& fit);
+
+/// The spec as text that parse_shape_spec reads back to the same spec (numbers in shortest round-trip form), e.g.
+/// "sphere:size=1.5,center=0/0/0". Of a resolved spec it names the shape without reference to another's box.
+std::string shape_spec_string(const ShapeSpec& spec);
+
 /// Builds the shape. Without an explicit centre/size it is placed to fit `fit` when given
 /// (centred in it, its largest half-extent equal to the box's largest half-extent), else at the
 /// origin with size 1. Spheres carry per-corner lat-long UVs (seam at longitude 0) and a checkerboard.

@@ -172,6 +172,25 @@ TEST(ShapeMake, ExplicitSizeAndCenterWinOverTheBox) {
   EXPECT_EQ(s.name, "sphere:size=0.5,center=1/2/3");
 }
 
+TEST(ShapeMake, ResolvedSpecTextRebuildsTheFittedShapeExactly) {
+  // What `map` records in report.json (inputs.source_shape) and `stretch` reads back: the same vertices, bit for bit.
+  const Eigen::AlignedBox3d box(Eigen::Vector3d(-0.31, 0.1, -2.7), Eigen::Vector3d(1.9, 0.77, 0.3));
+  for (const char* spec : {"sphere", "torus:r_ratio=0.3,res=40", "two-spheres:gap_ratio=0.25", "sphere:size=0.7"}) {
+    SCOPED_TRACE(spec);
+    const ShapeSpec resolved = resolve_shape_spec(parse_shape_spec(spec), box);
+    ASSERT_TRUE(resolved.center.has_value() && resolved.size.has_value());
+    const std::string text = shape_spec_string(resolved);
+    const Surface fitted = make_shape(parse_shape_spec(spec), box);
+    const Surface rebuilt = make_shape(parse_shape_spec(text), std::nullopt);
+    ASSERT_EQ(rebuilt.V.rows(), fitted.V.rows()) << text;
+    EXPECT_TRUE((rebuilt.V.array() == fitted.V.array()).all()) << text;
+    EXPECT_EQ(shape_spec_string(parse_shape_spec(text)), text);
+  }
+  // Without a box: the origin and size 1.
+  const ShapeSpec alone = resolve_shape_spec(parse_shape_spec("torus"), std::nullopt);
+  EXPECT_EQ(shape_spec_string(alone), "torus:size=1,center=0/0/0");
+}
+
 TEST(ShapeMake, RejectsInvalidSpecStructs) {
   ShapeSpec spec;
   spec.kind = "cone";
