@@ -1,66 +1,135 @@
 // Options of a pipeline run on the command line (see app/cli_options.h).
 #include "app/cli_options.h"
 
+#include <charconv>
+#include <cmath>
+#include <cstdlib>
+#include <limits>
 #include <string>
 
 #include "solver/linear_solver.h"
 
 namespace morphmap {
+namespace {
+
+// Validators of numeric options. CLI11's own called a value that is no number "not in range" and printed the
+// largest double in full ("--trace-step: Value -1 not in range 0.000000 to 179769313486231570814527...").
+
+bool read_real(const std::string& text, double& value) {
+  if (text.empty()) return false;
+  char* end = nullptr;
+  value = std::strtod(text.c_str(), &end);
+  return end == text.c_str() + text.size() && std::isfinite(value);
+}
+
+std::string in_quotes(const std::string& text) { return "'" + text + "'"; }
+
+std::string shortest(double x) {
+  char buffer[32];
+  const auto result = std::to_chars(buffer, buffer + sizeof buffer, x);
+  return std::string(buffer, result.ptr);
+}
+
+}  // namespace
+
+CLI::Validator whole_number(int lo, int hi) {
+  const bool bounded = hi != std::numeric_limits<int>::max();
+  const std::string range =
+      bounded ? "from " + std::to_string(lo) + " to " + std::to_string(hi) : "of at least " + std::to_string(lo);
+  return CLI::Validator(
+      [lo, hi, range](std::string& text) -> std::string {
+        long long value = 0;
+        const auto result = std::from_chars(text.data(), text.data() + text.size(), value);
+        const bool whole = !text.empty() && result.ec == std::errc() && result.ptr == text.data() + text.size();
+        if (whole && value >= lo && value <= hi) return {};
+        return "must be a whole number " + range + ", not " + in_quotes(text);
+      },
+      bounded ? "INT in [" + std::to_string(lo) + ", " + std::to_string(hi) + "]" : "INT >= " + std::to_string(lo));
+}
+
+namespace {
+
+/// A finite number above zero (`strict`) or at least zero.
+CLI::Validator real_above_zero(bool strict) {
+  return CLI::Validator(
+      [strict](std::string& text) -> std::string {
+        double value = 0.0;
+        if (read_real(text, value) && (strict ? value > 0.0 : value >= 0.0)) return {};
+        return std::string(strict ? "must be a positive number" : "must be zero or a positive number") + ", not " +
+               in_quotes(text);
+      },
+      strict ? "NUMBER > 0" : "NUMBER >= 0");
+}
+const CLI::Validator kPositive = real_above_zero(true);
+const CLI::Validator kNonNegative = real_above_zero(false);
+
+/// A finite number in [lo, hi].
+CLI::Validator real_in(double lo, double hi) {
+  const std::string range = "from " + shortest(lo) + " to " + shortest(hi);
+  return CLI::Validator(
+      [lo, hi, range](std::string& text) -> std::string {
+        double value = 0.0;
+        if (read_real(text, value) && value >= lo && value <= hi) return {};
+        return "must be a number " + range + ", not " + in_quotes(text);
+      },
+      "NUMBER in [" + shortest(lo) + ", " + shortest(hi) + "]");
+}
+
+}  // namespace
 
 void add_pipeline_options(CLI::App& cmd, PipelineOptions& o) {
   cmd.add_option("--voxels", o.morph.voxels, "Lattice voxels across the larger side of the union bounding box")
-      ->check(CLI::Range(4, 4096))
+      ->check(whole_number(4, 4096))
       ->capture_default_str();
-  cmd.add_option("--voxel-size", o.morph.voxel_size, "Explicit voxel size (overrides --voxels)")
-      ->check(CLI::NonNegativeNumber);
+  cmd.add_option("--voxel-size", o.morph.voxel_size, "Explicit voxel size (overrides --voxels)")->check(kNonNegative);
   cmd.add_option("--morph", o.morph_method,
                  "Implicit morph: distance (distance-field interpolation) or vim (variational implicit, 4D r^3 "
                  "radial basis functions through samples of both surfaces)")
       ->check(CLI::IsMember({"distance", "vim"}))
       ->capture_default_str();
   cmd.add_option("--vim-samples", o.vim.samples, "vim: constraint points per surface (farthest-point samples)")
-      ->check(CLI::Range(3, 20000))
+      ->check(whole_number(3, 20000))
       ->capture_default_str();
   cmd.add_option("--vim-separation", o.vim.separation,
                  "vim: distance between the planes of A and B in R^4, in units of the larger side of the union box")
-      ->check(CLI::PositiveNumber)
+      ->check(kPositive)
       ->capture_default_str();
   cmd.add_option("--vim-offset", o.vim.normal_offset,
                  "vim: distance of the normal constraints from the surface, in units of the larger side of the union "
                  "box")
-      ->check(CLI::PositiveNumber)
+      ->check(kPositive)
       ->capture_default_str();
   cmd.add_option("--time-steps", o.extract.time_steps, "Lattice intervals along the morph time t")
-      ->check(CLI::Range(1, 4096))
+      ->check(whole_number(1, 4096))
       ->capture_default_str();
   cmd.add_option(
          "--time-scale", o.extract.time_scale,
          "Length of one unit of morph time in R^4 (c); 0 = twice the larger side of the shapes' union bounding box")
-      ->check(CLI::NonNegativeNumber)
+      ->check(kNonNegative)
       ->capture_default_str();
   cmd.add_option("--zero-snap", o.extract.zero_snap,
                  "Lattice values within this many voxels of zero move to +-it, keeping crossings (and the slivers they "
                  "make) off lattice points")
-      ->check(CLI::Range(0.0, 0.45))
+      ->check(real_in(0.0, 0.45))
       ->capture_default_str();
   const auto names = solver_names();
   cmd.add_option("--solver", o.laplace.solver, "Laplace solver backend")
       ->check(CLI::IsMember(names))
       ->capture_default_str();
   cmd.add_option("--tolerance", o.laplace.solve.tolerance, "Relative residual at which iterative solvers stop")
-      ->check(CLI::PositiveNumber)
+      ->check(kPositive)
       ->capture_default_str();
   cmd.add_option("--deflation-voxels", o.laplace.deflation_cell_voxels,
                  "CG solvers deflate the space-time cells of this many voxels (0: no deflation)")
-      ->check(CLI::NonNegativeNumber)
+      ->check(kNonNegative)
       ->capture_default_str();
   cmd.add_option("--max-iterations", o.laplace.solve.max_iterations, "Iteration limit of iterative solvers")
-      ->check(CLI::PositiveNumber)
+      ->check(whole_number(1))
       ->capture_default_str();
   cmd.add_option("--change-threshold", o.laplace.solve.change_threshold,
                  "gauss-seidel stops once the change of s in a sweep (--change-measure) is below this (0: after "
                  "--max-iterations sweeps)")
-      ->check(CLI::NonNegativeNumber)
+      ->check(kNonNegative)
       ->capture_default_str();
   cmd.add_option_function<std::string>(
          "--change-measure",
@@ -94,7 +163,7 @@ void add_pipeline_options(CLI::App& cmd, PipelineOptions& o) {
   cmd.add_option("--trace-step", o.trace.step_variation,
                  "Characteristic tracing: largest change of the interpolated field over one Runge-Kutta step, "
                  "relative to its size")
-      ->check(CLI::PositiveNumber)
+      ->check(kPositive)
       ->capture_default_str();
   cmd.add_option("--trace-order", o.trace.order,
                  "Characteristic tracing: order of the Runge-Kutta step in each tet, 2 (Heun) or 4 (classical)")
@@ -102,7 +171,7 @@ void add_pipeline_options(CLI::App& cmd, PipelineOptions& o) {
       ->capture_default_str();
   cmd.add_option("--trace-smoothing", o.trace.field_smoothing,
                  "Characteristic tracing: passes of neighbour averaging of the flow field before tracing")
-      ->check(CLI::Range(0, 100))
+      ->check(whole_number(0, 100))
       ->capture_default_str();
   cmd.add_option("--compare-solvers", o.compare_solvers,
                  "Also solve the same system with these backends and report each (Table II's diffusion column)")
@@ -116,7 +185,7 @@ void add_pipeline_options(CLI::App& cmd, PipelineOptions& o) {
   cmd.add_option("--seam-threshold", o.seams.label_threshold,
                  "A source tet spans a topological seam (its triangles are split there) when two of its labels are "
                  "farther apart than this fraction of the source's bounding-box diagonal")
-      ->check(CLI::PositiveNumber)
+      ->check(kPositive)
       ->capture_default_str();
   cmd.add_option_function<std::string>(
          "--fold-repair", [&o](const std::string& value) { o.untangle.enabled = value == "on"; },
@@ -139,7 +208,7 @@ void add_pipeline_options(CLI::App& cmd, PipelineOptions& o) {
       ->check(CLI::IsMember({"on", "off"}))
       ->default_str("on");
   cmd.add_flag("--ply", o.write_ply, "Also write target.ply");
-  cmd.add_option("--threads", o.threads, "Worker threads (0 = all cores)")->check(CLI::NonNegativeNumber);
+  cmd.add_option("--threads", o.threads, "Worker threads (0 = all cores)")->check(whole_number(0));
   cmd.add_option_function<std::string>(
          "--max-memory", [&o](const std::string& text) { o.max_memory_bytes = parse_memory_size(text); },
          "Refuse a run whose estimated peak memory exceeds SIZE (e.g. 8G, 512M)")

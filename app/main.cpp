@@ -61,7 +61,7 @@ int main(int argc, char** argv) {
   render->add_option("--heat", render_labels, "labels.txt of MESH: colour by per-triangle L2 stretch (needs --source)");
   render->add_option("--source", render_source, "The source surface of the labels (file or built-in shape)");
   render->add_option("--checker", render_checker, "Checkerboard with N squares per side instead of the texture")
-      ->check(CLI::Range(1, 1024));
+      ->check(morphmap::whole_number(1, 1024));
   render->add_flag("--shaded", render_shaded, "Grey shading only");
   for (CLI::App* cmd : {render, map, demo}) {
     cmd->add_option("--view", render_view, "Direction from the shape towards the camera, x,y,z")

@@ -235,6 +235,24 @@ TEST_F(Cli, MemoryGuardRefusesBeforeAllocating) {
   expect_rejected("sphere torus --morph spline", "--morph");
 }
 
+TEST_F(Cli, NumericOptionsNameTheirRangeAndTheValue) {
+  // CLI11's validators called a word "not in range" and printed the largest double in full as the bound.
+  expect_rejected("sphere torus --trace-step -1", "--trace-step: must be a positive number, not '-1'");
+  expect_rejected("sphere torus --tolerance 1e-9x", "--tolerance: must be a positive number, not '1e-9x'");
+  expect_rejected("sphere torus --zero-snap 0.5", "--zero-snap: must be a number from 0 to 0.45, not '0.5'");
+  expect_rejected("sphere torus --threads 1.5", "--threads: must be a whole number of at least 0, not '1.5'");
+  expect_rejected("sphere torus --trace-smoothing 101",
+                  "--trace-smoothing: must be a whole number from 0 to 100, not '101'");
+  const CommandRun r = run_command("map sphere torus -o " + (dir_ / "v").string() + " --voxels abc");
+  EXPECT_EQ(r.status, 2) << r.output;
+  EXPECT_NE(r.output.find("--voxels: must be a whole number from 4 to 4096, not 'abc'"), std::string::npos) << r.output;
+  // In range, they run.
+  EXPECT_EQ(run_command("map sphere torus -o " + (dir_ / "ok").string() +
+                        " --voxels 12 --time-steps 3 --zero-snap 0.45 --trace-step 0.5 --threads 1")
+                .status,
+            0);
+}
+
 TEST_F(Cli, StretchReadsAMapAndRejectsBadLabels) {
   const fs::path out = dir_ / "map";
   ASSERT_EQ(run_command("map sphere torus -o " + out.string() + " --voxels 16 --time-steps 4").status, 0);
