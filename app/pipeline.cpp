@@ -783,7 +783,6 @@ PipelineResult run_pipeline(const PipelineOptions& options) {
 
   result.target_labels = frame_a.to_world(points_of(hits));
   result.target.V = frame_b.to_world(result.target.V);
-  const Eigen::MatrixXd& target_positions = result.target.V;
   result.mesh_vertices = mesh.vertex_count();
   result.mesh_tets = mesh.tet_count();
   result.fallbacks = options.method == "trace" ? traced_total.stalled + traced_total.invalid : transport.fallbacks();
@@ -1026,10 +1025,21 @@ PipelineResult run_pipeline(const PipelineOptions& options) {
       mtl_name = "target.mtl";
       write_mtl(out->staged(mtl_name), texture_name);
     }
-    // target.obj is the seam-split B with per-corner UVs; target.ply keeps the extracted B with per-vertex UVs.
-    write_obj(out->staged("target.obj"), frame_b.to_world(result.target_seams.V), result.target_seams.F,
-              result.target_seams.UV, result.target_seams.FUV, mtl_name);
-    if (options.write_ply) write_ply(out->staged("target.ply"), target_positions, result.target.F, result.target_uv);
+    // target.obj is the seam-split B with per-corner UVs; target.ply the same triangles, a vertex split where its
+    // corners take different UVs (PLY has per-vertex UVs only; before 2026-12-06 it held the unsplit B, whose
+    // triangles across a texture seam interpolated across the texture atlas).
+    const Eigen::MatrixXd target_world = frame_b.to_world(result.target_seams.V);
+    write_obj(out->staged("target.obj"), target_world, result.target_seams.F, result.target_seams.UV,
+              result.target_seams.FUV, mtl_name);
+    if (options.write_ply) {
+      const SeamResult& t = result.target_seams;
+      if (t.FUV.rows() == t.F.rows() && t.F.rows() > 0) {
+        const PerVertexUvMesh ply = per_vertex_uv(target_world, t.F, t.UV, t.FUV);
+        write_ply(out->staged("target.ply"), ply.V, ply.F, ply.UV);
+      } else {
+        write_ply(out->staged("target.ply"), target_world, t.F, t.UV.rows() == t.V.rows() ? t.UV : Eigen::MatrixXd());
+      }
+    }
     write_labels(out->staged("labels.txt"), seam_preimages);
     nlohmann::json slice_report = nlohmann::json::array();
     for (const SliceOut& s : slices) {

@@ -930,6 +930,42 @@ void write_mtl(const std::string& path, const std::string& texture_name) {
   file.finish();
 }
 
+PerVertexUvMesh per_vertex_uv(const Eigen::MatrixXd& V, const TriIndices& F, const Eigen::MatrixXd& UV,
+                              const TriIndices& FUV) {
+  if (FUV.rows() != F.rows() || UV.cols() != 2)
+    throw InvalidInput("per_vertex_uv: need FUV with a row per face (" + std::to_string(F.rows()) + ") and UV #T by 2");
+  PerVertexUvMesh out;
+  out.F.resize(F.rows(), 3);
+  // copies[v]: (texture coordinate index, output vertex) of each copy of v made so far; a vertex has few. Copies are
+  // told apart by the coordinates' values, not their indices (the seam split gives every corner its own index), and
+  // values within 1e-9 are one (the split computes a vertex's coordinate per triangle, which may differ by rounding).
+  std::vector<std::vector<std::pair<int, int>>> copies(std::size_t(V.rows()));
+  for (Eigen::Index f = 0; f < F.rows(); ++f)
+    for (int c = 0; c < 3; ++c) {
+      const int v = F(f, c), t = FUV(f, c);
+      if (v < 0 || v >= V.rows() || t < 0 || t >= UV.rows())
+        throw InvalidInput("per_vertex_uv: face " + std::to_string(f) + " has an index out of range");
+      auto& list = copies[std::size_t(v)];
+      auto found = std::find_if(list.begin(), list.end(), [&](const std::pair<int, int>& e) {
+        return (UV.row(e.first) - UV.row(t)).squaredNorm() <= 1e-18;
+      });
+      if (found == list.end()) {
+        list.emplace_back(t, int(out.vertex.size()));
+        out.vertex.push_back(v);
+        found = list.end() - 1;
+      }
+      out.F(f, c) = found->second;
+    }
+  out.V.resize(Eigen::Index(out.vertex.size()), 3);
+  out.UV.resize(Eigen::Index(out.vertex.size()), 2);
+  for (const auto& list : copies)
+    for (const auto& [t, w] : list) {
+      out.V.row(w) = V.row(out.vertex[std::size_t(w)]);
+      out.UV.row(w) = UV.row(t);
+    }
+  return out;
+}
+
 void write_ply(const std::string& path, const Eigen::MatrixXd& V, const TriIndices& F, const Eigen::MatrixXd& UV) {
   check_vertices(path, V);
   check_faces(path, "vertex", F, V.rows());

@@ -14,6 +14,7 @@
 #include <utility>
 #include <vector>
 
+#include "io/mesh_io.h"
 #include "mesh/surface.h"
 
 namespace morphmap {
@@ -281,6 +282,33 @@ TEST(Pipeline, LabelsFileHoldsEveryLabelAsPrintfsSeventeenDigits) {
   }
   EXPECT_EQ(lines, r.target_seams.V.rows());
   EXPECT_GT(lines, 100);
+  std::filesystem::remove_all(dir);
+}
+
+TEST(Pipeline, PlyHoldsTheObjsTrianglesWithTheirCornerUvs) {
+  // target.ply is target.obj's seam-split mesh with per-vertex UVs: every triangle's corners carry the OBJ's
+  // per-corner UVs. (It held the unsplit B before, whose triangles across the sphere's longitude-0 seam took UVs from
+  // both sides of the texture.)
+  const std::filesystem::path dir = std::filesystem::path(::testing::TempDir()) / "ply_uvs";
+  std::filesystem::remove_all(dir);
+  PipelineOptions o = small_options("sphere:res=24", "torus", "cg-amg");
+  o.output_dir = dir.string();
+  o.write_ply = true;
+  const PipelineResult r = run_pipeline(o);
+  const Surface obj = read_surface((dir / "target.obj").string());
+  const Surface ply = read_surface((dir / "target.ply").string());
+  ASSERT_TRUE(obj.has_uv());
+  ASSERT_TRUE(ply.has_uv());
+  ASSERT_EQ(ply.F.rows(), obj.F.rows());
+  EXPECT_GT(r.target_seams.texture_split, 0);
+  EXPECT_GT(ply.V.rows(), obj.V.rows());  // vertices on the texture seam, once per side
+  double worst = 0.0;
+  for (Eigen::Index f = 0; f < obj.F.rows(); ++f)
+    for (int c = 0; c < 3; ++c) {
+      worst = std::max(worst, (ply.V.row(ply.F(f, c)) - obj.V.row(obj.F(f, c))).cwiseAbs().maxCoeff());
+      worst = std::max(worst, (ply.UV.row(ply.FUV(f, c)) - obj.UV.row(obj.FUV(f, c))).cwiseAbs().maxCoeff());
+    }
+  EXPECT_LT(worst, 1e-6);  // PLY stores u, v as float
   std::filesystem::remove_all(dir);
 }
 

@@ -338,6 +338,32 @@ TEST_F(MeshIoTest, PlyRoundTripIsExact) {
   EXPECT_FALSE(rb.has_uv());
 }
 
+TEST(PerVertexUv, SplitsVerticesAtTextureSeamsOnly) {
+  // A square of two triangles sharing the edge 0-2; vertex 2's corners take two different UVs (a texture seam runs
+  // through it), vertex 0's two corners the same UV under two indices (as the seam split writes them).
+  Eigen::MatrixXd V(4, 3);
+  V << 0, 0, 0, 1, 0, 0, 1, 1, 0, 0, 1, 0;
+  TriIndices F(2, 3);
+  F << 0, 1, 2, 0, 2, 3;
+  Eigen::MatrixXd UV(6, 2);
+  UV << 0, 0, 1, 0, 1, 1, 0, 0, 0.5, 0.5, 0, 1;
+  TriIndices FUV(2, 3);
+  FUV << 0, 1, 2, 3, 4, 5;
+  const PerVertexUvMesh m = per_vertex_uv(V, F, UV, FUV);
+  ASSERT_EQ(m.V.rows(), 5);  // vertex 2 twice
+  EXPECT_EQ(m.vertex, (std::vector<int>{0, 1, 2, 2, 3}));
+  EXPECT_EQ(m.F(0, 0), m.F(1, 0));  // vertex 0 stays one vertex: its UVs are equal
+  EXPECT_NE(m.F(0, 2), m.F(1, 1));  // vertex 2 is split
+  for (Eigen::Index f = 0; f < 2; ++f)
+    for (int c = 0; c < 3; ++c) {
+      EXPECT_EQ(m.V.row(m.F(f, c)), V.row(F(f, c)));
+      EXPECT_EQ(m.UV.row(m.F(f, c)), UV.row(FUV(f, c)));
+    }
+  TriIndices bad = FUV;
+  bad(1, 2) = 6;
+  EXPECT_THROW(per_vertex_uv(V, F, UV, bad), InvalidInput);
+}
+
 TEST_F(MeshIoTest, WritersStreamFilesLargerThanTheirBuffer) {
   // The writers hand their text to the file a megabyte at a time: files of several megabytes cross that boundary
   // many times, mid-line included, and must still read back bit for bit.
