@@ -234,6 +234,13 @@ Eigen::AlignedBox3d bounding_box(const Eigen::MatrixXd& V) {
   return box;
 }
 
+bool orient_outward(Surface& surface) {
+  if (!(signed_volume(surface.V, surface.F) < 0.0)) return false;
+  surface.F.col(1).swap(surface.F.col(2));
+  if (surface.FUV.rows() == surface.F.rows()) surface.FUV.col(1).swap(surface.FUV.col(2));
+  return true;
+}
+
 double signed_volume(const Eigen::MatrixXd& V, const Eigen::MatrixXi& F) {
   if (F.rows() == 0) return 0.0;
   // The enclosed volume does not depend on the origin; the box centre keeps the triple products small.

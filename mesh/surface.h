@@ -69,6 +69,11 @@ SurfaceCheck check_surface(const Eigen::MatrixXi& F, std::int64_t vertex_count);
 /// empty SurfaceCheck).
 SurfaceCheck validate_surface(const Surface& surface, bool require_closed);
 
+/// Turns a closed surface whose faces wind inward (negative enclosed volume) outward: every face's corners, and its
+/// texture corners, in reverse order. Returns whether it did. Inside and outside, the distance fields' sign, the
+/// source's normals and with them the fold counts and the repair all take the faces' winding as outward.
+bool orient_outward(Surface& surface);
+
 /// Axis-aligned bounding box of the vertices.
 Eigen::AlignedBox3d bounding_box(const Eigen::MatrixXd& V);
 

@@ -203,5 +203,25 @@ TEST(SurfaceMeasures, VolumeDoesNotDependOnTranslation) {
   EXPECT_NEAR(signed_volume(s.V, s.F), 1.0 / 6.0, 1e-9);
 }
 
+TEST(SurfaceOrient, InwardFacesAndTheirTextureCornersAreTurnedOutward) {
+  Surface s = tetrahedron();
+  EXPECT_FALSE(orient_outward(s));  // outward already: untouched
+  EXPECT_EQ(s.F, tetrahedron().F);
+  s.F = tetrahedron().F.rowwise().reverse();
+  s.UV = Eigen::MatrixXd::Random(12, 2);
+  s.FUV.resize(4, 3);
+  s.FUV << 0, 1, 2, 3, 4, 5, 6, 7, 8, 9, 10, 11;
+  const Eigen::MatrixXi inward = s.F, inward_uv = s.FUV;
+  EXPECT_TRUE(orient_outward(s));
+  EXPECT_NEAR(signed_volume(s.V, s.F), 1.0 / 6.0, 1e-15);
+  EXPECT_TRUE(check_surface(s.F, s.V.rows()).inconsistent_edges == 0);
+  for (Eigen::Index f = 0; f < 4; ++f) {  // each corner keeps its texture coordinate
+    EXPECT_EQ(s.F(f, 0), inward(f, 0));
+    EXPECT_EQ(s.F(f, 1), inward(f, 2));
+    EXPECT_EQ(s.FUV(f, 1), inward_uv(f, 2));
+    EXPECT_EQ(s.FUV(f, 2), inward_uv(f, 1));
+  }
+}
+
 }  // namespace
 }  // namespace morphmap
