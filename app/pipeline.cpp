@@ -77,11 +77,39 @@ std::string format_time(double t) {
   return s.str();
 }
 
-// A built-in shape's spec as placed (`a_shape`, `b_shape`: empty for a mesh) goes to report.json, so that `morphmap
-// stretch` can rebuild the very shape the map used: fitted to target.obj's box instead, a sphere came out 0.5%
-// larger than the one fitted to the built-in torus.
+// What load_inputs did to the inputs (index 0 the source, 1 the target), for report.json's `inputs`.
+struct InputNotes {
+  // A built-in shape's spec as placed (empty for a mesh), so that `morphmap stretch` can rebuild the very shape the
+  // map used: fitted to target.obj's box instead, a sphere came out 0.5% larger than the one fitted to the torus.
+  std::string shape[2];
+  bool reoriented[2] = {false, false};  // its faces wound inward and were turned
+  std::int64_t welded[2] = {0, 0};      // vertices merged into another at the same position (an open mesh closed)
+};
+
+// validate_surface(surface, true); a mesh that is not closed as read but is once vertices at bitwise-equal positions
+// are merged (exported with its vertices split at texture or normal seams, or as a triangle soup) is taken welded.
+// Otherwise the error is the mesh's as read.
+SurfaceCheck validate_welding(Surface& surface, std::int64_t& welded) {
+  try {
+    return validate_surface(surface, true);
+  } catch (const InvalidInput& as_read) {
+    Surface joined = surface;
+    const std::int64_t merged = weld_coincident_vertices(joined);
+    if (merged == 0) throw;
+    SurfaceCheck check;
+    try {
+      check = validate_surface(joined, true);
+    } catch (const InvalidInput&) {
+      throw as_read;
+    }
+    surface = std::move(joined);
+    welded = merged;
+    return check;
+  }
+}
+
 void load_inputs(const PipelineOptions& options, Surface& A, Surface& B, SurfaceCheck& check_a, SurfaceCheck& check_b,
-                 std::string& a_shape, std::string& b_shape, bool& a_reoriented, bool& b_reoriented) {
+                 InputNotes& notes) {
   const bool a_builtin = is_builtin_shape(options.source), b_builtin = is_builtin_shape(options.target);
   // Parse both specs first so that a bad spec is reported before any file is read.
   std::optional<ShapeSpec> a_spec, b_spec;
@@ -93,20 +121,20 @@ void load_inputs(const PipelineOptions& options, Surface& A, Surface& B, Surface
     const ShapeSpec placed = resolve_shape_spec(*b_spec, a_builtin ? std::nullopt : std::optional(bounding_box(A.V)));
     B = make_shape(placed, std::nullopt);
     B.name = shape_spec_string(*b_spec);  // messages name the shape as given
-    b_shape = shape_spec_string(placed);
+    notes.shape[1] = shape_spec_string(placed);
   }
   if (a_builtin) {
     const ShapeSpec placed = resolve_shape_spec(*a_spec, std::optional(bounding_box(B.V)));
     A = make_shape(placed, std::nullopt);
     A.name = shape_spec_string(*a_spec);
-    a_shape = shape_spec_string(placed);
+    notes.shape[0] = shape_spec_string(placed);
   }
-  check_a = validate_surface(A, true);
-  check_b = validate_surface(B, true);
+  check_a = validate_welding(A, notes.welded[0]);
+  check_b = validate_welding(B, notes.welded[1]);
   // A mesh whose faces wind inward is mapped as the same solid, its faces turned (measured: a sphere -> bunny map
   // from bunny_closed.obj with its faces reversed counted 12852 folded triangles instead of 135).
-  a_reoriented = orient_outward(A);
-  b_reoriented = orient_outward(B);
+  notes.reoriented[0] = orient_outward(A);
+  notes.reoriented[1] = orient_outward(B);
   if (!options.texture.empty()) {
     if (!A.has_uv())
       throw InvalidInput(options.texture + ": --texture needs texture coordinates on the source, which " +
@@ -337,8 +365,9 @@ StretchInputs read_stretch_inputs(const std::string& target, const std::string& 
   } else {
     A = read_surface(source);
   }
-  validate_surface(A, true);
-  orient_outward(A);  // as `map` does
+  std::int64_t welded = 0;
+  validate_welding(A, welded);  // as `map` does
+  orient_outward(A);
   std::ifstream in(labels);
   if (!in) throw IoError(labels + ": cannot open file");
   Eigen::MatrixXd& pre = inputs.preimages;
@@ -408,10 +437,8 @@ PipelineResult run_pipeline(const PipelineOptions& options) {
   auto start = Clock::now();
   Surface A, B;
   SurfaceCheck input_check_a, input_check_b;
-  std::string source_shape, target_shape;
-  bool source_reoriented = false, target_reoriented = false;
-  load_inputs(options, A, B, input_check_a, input_check_b, source_shape, target_shape, source_reoriented,
-              target_reoriented);
+  InputNotes input_notes;
+  load_inputs(options, A, B, input_check_a, input_check_b, input_notes);
   Frame frame_a, frame_b;
   if (options.align == "bbox") {
     frame_a = normalise(A);
@@ -795,10 +822,12 @@ PipelineResult run_pipeline(const PipelineOptions& options) {
   result.fallbacks = options.method == "trace" ? traced_total.stalled + traced_total.invalid : transport.fallbacks();
 
   report["inputs"] = {{"source", options.source}, {"target", options.target}};
-  if (!source_shape.empty()) report["inputs"]["source_shape"] = source_shape;
-  if (!target_shape.empty()) report["inputs"]["target_shape"] = target_shape;
-  report["inputs"]["source_reoriented"] = source_reoriented;  // its faces wound inward and were turned
-  report["inputs"]["target_reoriented"] = target_reoriented;
+  for (int which = 0; which < 2; ++which) {
+    const std::string side = which == 0 ? "source" : "target";
+    if (!input_notes.shape[which].empty()) report["inputs"][side + "_shape"] = input_notes.shape[which];
+    report["inputs"][side + "_reoriented"] = input_notes.reoriented[which];
+    report["inputs"][side + "_welded_vertices"] = input_notes.welded[which];
+  }
   report["options"] = {{"voxels", options.morph.voxels},
                        {"voxel_size", morph.field.voxel_size},
                        {"padding", options.morph.padding},

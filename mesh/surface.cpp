@@ -10,6 +10,8 @@
 #include <limits>
 #include <numeric>
 #include <sstream>
+#include <tuple>
+#include <vector>
 
 #include "mesh/errors.h"
 
@@ -232,6 +234,38 @@ Eigen::AlignedBox3d bounding_box(const Eigen::MatrixXd& V) {
   Eigen::AlignedBox3d box;  // constructed empty
   for (Eigen::Index i = 0; i < V.rows(); ++i) box.extend(Eigen::Vector3d(V(i, 0), V(i, 1), V(i, 2)));
   return box;
+}
+
+std::int64_t weld_coincident_vertices(Surface& surface) {
+  const Eigen::Index n = surface.V.rows();
+  std::vector<Eigen::Index> order(static_cast<std::size_t>(n));
+  std::iota(order.begin(), order.end(), Eigen::Index(0));
+  const auto key = [&](Eigen::Index i) {
+    return std::make_tuple(surface.V(i, 0), surface.V(i, 1), surface.V(i, 2), i);
+  };
+  std::sort(order.begin(), order.end(), [&](Eigen::Index a, Eigen::Index b) { return key(a) < key(b); });
+  std::vector<int> target(static_cast<std::size_t>(n));
+  std::int64_t merged = 0;
+  for (std::size_t r = 0; r < order.size(); ++r) {
+    const Eigen::Index i = order[r];
+    const bool same = r > 0 && surface.V.row(i) == surface.V.row(order[r - 1]);
+    target[std::size_t(i)] = same ? target[std::size_t(order[r - 1])] : int(i);  // the run's lowest index
+    merged += same;
+  }
+  if (merged == 0) return 0;
+  std::vector<int> renumber(static_cast<std::size_t>(n), -1);
+  for (Eigen::Index f = 0; f < surface.F.rows(); ++f)
+    for (int c = 0; c < 3; ++c) renumber[std::size_t(target[std::size_t(surface.F(f, c))])] = 0;
+  int next = 0;
+  for (auto& r : renumber)
+    if (r == 0) r = next++;
+  Eigen::MatrixXd V(next, 3);
+  for (Eigen::Index i = 0; i < n; ++i)
+    if (renumber[std::size_t(i)] >= 0) V.row(renumber[std::size_t(i)]) = surface.V.row(i);
+  for (Eigen::Index f = 0; f < surface.F.rows(); ++f)
+    for (int c = 0; c < 3; ++c) surface.F(f, c) = renumber[std::size_t(target[std::size_t(surface.F(f, c))])];
+  surface.V = std::move(V);
+  return merged;
 }
 
 bool orient_outward(Surface& surface) {

@@ -69,6 +69,12 @@ SurfaceCheck check_surface(const Eigen::MatrixXi& F, std::int64_t vertex_count);
 /// empty SurfaceCheck).
 SurfaceCheck validate_surface(const Surface& surface, bool require_closed);
 
+/// Merges vertices at bitwise-equal positions into the one of lowest index and drops the vertices no face uses then,
+/// keeping the rest in order (texture coordinates, indexed per corner, are untouched): a mesh exported with its
+/// vertices split at texture or normal seams, or as a triangle soup, becomes the closed surface it describes. Returns
+/// how many vertices were merged away.
+std::int64_t weld_coincident_vertices(Surface& surface);
+
 /// Turns a closed surface whose faces wind inward (negative enclosed volume) outward: every face's corners, and its
 /// texture corners, in reverse order. Returns whether it did. Inside and outside, the distance fields' sign, the
 /// source's normals and with them the fold counts and the repair all take the faces' winding as outward.

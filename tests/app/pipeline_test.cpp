@@ -16,6 +16,7 @@
 #include <vector>
 
 #include "io/mesh_io.h"
+#include "mesh/errors.h"
 #include "mesh/shapes.h"
 #include "mesh/surface.h"
 
@@ -338,6 +339,42 @@ TEST(Pipeline, SourceWithInwardFacesMapsAsTheSameSolid) {
   EXPECT_LT(folded("out.obj"), triangles("out.obj") / 20);
   const auto coverage = [&](const char* name) { return reports[name]["stretch"]["coverage"].get<double>(); };
   EXPECT_NEAR(coverage("in.obj"), coverage("out.obj"), 0.05);
+  std::filesystem::remove_all(dir);
+}
+
+TEST(Pipeline, TriangleSoupIsWeldedAndMapsLikeTheMesh) {
+  // A mesh exported as a triangle soup (every face with its own three vertices) is the same closed surface: it is
+  // welded at load, reported, and maps exactly as the shared-vertex mesh does. Welding that cannot close it leaves
+  // the error about the mesh as read.
+  const std::filesystem::path dir = std::filesystem::path(::testing::TempDir()) / "soup";
+  std::filesystem::create_directories(dir);
+  const Surface torus = make_shape(parse_shape_spec("torus:res=24"), std::nullopt);
+  Eigen::MatrixXd V(3 * torus.F.rows(), 3);
+  TriIndices F(torus.F.rows(), 3);
+  for (Eigen::Index f = 0; f < torus.F.rows(); ++f)
+    for (int c = 0; c < 3; ++c) {
+      V.row(3 * f + c) = torus.V.row(torus.F(f, c));
+      F(f, c) = int(3 * f + c);
+    }
+  write_obj((dir / "soup.obj").string(), V, F, Eigen::MatrixXd(), TriIndices(), "");
+  write_obj((dir / "mesh.obj").string(), torus.V, torus.F, Eigen::MatrixXd(), TriIndices(), "");
+  const PipelineResult soup = run_pipeline(small_options("sphere", (dir / "soup.obj").string(), "cg-amg"));
+  const PipelineResult mesh = run_pipeline(small_options("sphere", (dir / "mesh.obj").string(), "cg-amg"));
+  EXPECT_EQ(nlohmann::json::parse(soup.report_json)["inputs"]["target_welded_vertices"].get<std::int64_t>(),
+            V.rows() - torus.V.rows());
+  EXPECT_EQ(nlohmann::json::parse(mesh.report_json)["inputs"]["target_welded_vertices"].get<std::int64_t>(), 0);
+  ASSERT_EQ(soup.target_labels.rows(), mesh.target_labels.rows());
+  EXPECT_EQ(soup.target_labels, mesh.target_labels);
+  // One face short: welding leaves three boundary edges, and the message counts the soup's own.
+  write_obj((dir / "open.obj").string(), V, F.topRows(F.rows() - 1), Eigen::MatrixXd(), TriIndices(), "");
+  try {
+    run_pipeline(small_options("sphere", (dir / "open.obj").string(), "cg-amg"));
+    ADD_FAILURE() << "an open soup was accepted";
+  } catch (const InvalidInput& e) {
+    EXPECT_NE(std::string(e.what()).find("not closed (" + std::to_string(3 * (F.rows() - 1)) + " boundary edges)"),
+              std::string::npos)
+        << e.what();
+  }
   std::filesystem::remove_all(dir);
 }
 

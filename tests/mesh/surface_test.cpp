@@ -223,5 +223,32 @@ TEST(SurfaceOrient, InwardFacesAndTheirTextureCornersAreTurnedOutward) {
   }
 }
 
+TEST(SurfaceWeld, TriangleSoupBecomesTheClosedSurface) {
+  const Surface tet = tetrahedron();
+  Surface soup;
+  soup.V.resize(12, 3);
+  soup.F.resize(4, 3);
+  for (Eigen::Index f = 0; f < 4; ++f)
+    for (int c = 0; c < 3; ++c) {
+      soup.V.row(3 * f + c) = tet.V.row(tet.F(f, c));
+      soup.F(f, c) = int(3 * f + c);
+    }
+  EXPECT_FALSE(check_surface(soup.F, soup.V.rows()).closed());
+  EXPECT_EQ(weld_coincident_vertices(soup), 8);
+  ASSERT_EQ(soup.V.rows(), 4);
+  const SurfaceCheck check = check_surface(soup.F, soup.V.rows());
+  EXPECT_TRUE(check.closed() && check.manifold() && check.inconsistent_edges == 0);
+  EXPECT_NEAR(signed_volume(soup.V, soup.F), 1.0 / 6.0, 1e-15);
+  for (Eigen::Index f = 0; f < 4; ++f)
+    for (int c = 0; c < 3; ++c) EXPECT_EQ(soup.V.row(soup.F(f, c)), tet.V.row(tet.F(f, c)));
+  // Nothing to merge: untouched, unused vertices included.
+  Surface spare = tet;
+  spare.V.conservativeResize(5, 3);
+  spare.V.row(4) << 7, 7, 7;
+  EXPECT_EQ(weld_coincident_vertices(spare), 0);
+  EXPECT_EQ(spare.V.rows(), 5);
+  EXPECT_EQ(spare.F, tet.F);
+}
+
 }  // namespace
 }  // namespace morphmap
