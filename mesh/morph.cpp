@@ -25,28 +25,38 @@
 namespace morphmap {
 namespace {
 
-openvdb::FloatGrid::Ptr signed_distance_grid(const Surface& surface, const openvdb::math::Transform& xform,
-                                             float band_voxels) {
+// The grid is built in index space (voxel size 1, lattice point (i, j, k) at index (i, j, k)), its values scaled back
+// by h when sampled: OpenVDB refuses a transform whose voxel size cubed is below 3e-15 ("Non-zero scale values
+// required", so a mesh in units where the voxel is under 1.4e-5 could not be mapped), and single-precision world
+// coordinates far from the origin lose what a voxel resolves (a bunny 0.15 across moved to x = 1e5 has a float step
+// of half a voxel at 20 voxels). Points relative to the lattice origin, in voxels, keep float's precision for both.
+openvdb::FloatGrid::Ptr signed_distance_grid(const Surface& surface, const MorphField& field, float band_voxels) {
+  const double h = field.voxel_size;
   std::vector<openvdb::Vec3s> points(surface.V.rows());
-  for (Eigen::Index i = 0; i < surface.V.rows(); ++i)
-    points[i] = openvdb::Vec3s(float(surface.V(i, 0)), float(surface.V(i, 1)), float(surface.V(i, 2)));
+  for (Eigen::Index i = 0; i < surface.V.rows(); ++i) {
+    const Eigen::Vector3d p = (surface.V.row(i).transpose() - field.origin) / h;
+    points[i] = openvdb::Vec3s(float(p.x()), float(p.y()), float(p.z()));
+  }
   std::vector<openvdb::Vec3I> triangles(surface.F.rows());
   for (Eigen::Index f = 0; f < surface.F.rows(); ++f)
     triangles[f] = openvdb::Vec3I(surface.F(f, 0), surface.F(f, 1), surface.F(f, 2));
   const std::vector<openvdb::Vec4I> quads;
-  return openvdb::tools::meshToSignedDistanceField<openvdb::FloatGrid>(xform, points, triangles, quads, band_voxels,
+  const auto xform = openvdb::math::Transform::createLinearTransform(1.0);
+  return openvdb::tools::meshToSignedDistanceField<openvdb::FloatGrid>(*xform, points, triangles, quads, band_voxels,
                                                                        band_voxels);
 }
 
-// Copies grid values at lattice points into a dense array (x fastest), one accessor per task.
+// Copies grid values at lattice points into a dense array (x fastest), one accessor per task; the grid is in voxel
+// units (signed_distance_grid), the array in the surfaces' own.
 void sample_lattice(const openvdb::FloatGrid& grid, const MorphField& field, std::vector<float>& out) {
   out.assign(std::size_t(field.dims.prod()), 0.0f);
+  const float h = float(field.voxel_size);
   tbb::parallel_for(tbb::blocked_range<int>(0, field.dims.z()), [&](const tbb::blocked_range<int>& range) {
     auto accessor = grid.getConstAccessor();
     for (int k = range.begin(); k != range.end(); ++k)
       for (int j = 0; j < field.dims.y(); ++j)
         for (int i = 0; i < field.dims.x(); ++i)
-          out[std::size_t(field.index(i, j, k))] = accessor.getValue(openvdb::Coord(i, j, k));
+          out[std::size_t(field.index(i, j, k))] = h * accessor.getValue(openvdb::Coord(i, j, k));
   });
 }
 
@@ -173,9 +183,6 @@ MorphResult build_morph(const Surface& A, const Surface& B, const MorphOptions& 
   MorphField& field = result.field;
   const double h = field.voxel_size;
 
-  // Index (0,0,0) of the grid sits at the lattice origin, so lattice points are voxel centres.
-  auto xform = openvdb::math::Transform::createLinearTransform(h);
-  xform->postTranslate(openvdb::Vec3d(field.origin.x(), field.origin.y(), field.origin.z()));
   const float band = float(options.band);
   // Built-in shapes carry their exact distance: the voxelisation and the closest-point queries are needed only for
   // meshes (and the analytic field is the shape itself, not its triangulation).
@@ -184,7 +191,7 @@ MorphResult build_morph(const Surface& A, const Surface& B, const MorphOptions& 
     if (surface->signed_distance) {
       sample_distance(surface->signed_distance, field, values);
     } else {
-      auto grid = signed_distance_grid(*surface, *xform, band);
+      auto grid = signed_distance_grid(*surface, field, band);
       sample_lattice(*grid, field, values);
     }
   }

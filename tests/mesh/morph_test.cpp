@@ -6,6 +6,7 @@
 
 #include <cmath>
 #include <optional>
+#include <utility>
 
 #include "mesh/shapes.h"
 #include "mesh/transfer.h"
@@ -54,6 +55,35 @@ TEST(DistanceMorph, AnalyticShapesAreSampledExactlyAndMeshesExactlyBeyondTheBand
       }
   EXPECT_GT(crossing_points, 100);
   EXPECT_GT(beyond, 10);
+}
+
+TEST(DistanceMorph, MeshValuesDoNotDependOnTheUnitsOrWhereTheShapeSits) {
+  // The same two meshes in units a million times smaller (OpenVDB refused a voxel under 1.4e-5: "Non-zero scale values
+  // required") and moved to x = 1e5 (where a float's step is 0.008, half a voxel of these shapes at 16 voxels): the
+  // lattice values are the unit ones, scaled, to a small fraction of a voxel.
+  Surface A = shape("sphere:size=0.6,center=0/0/0,res=32"), B = shape("torus:size=1,center=0.1/0/0,res=32");
+  A.signed_distance = nullptr;
+  B.signed_distance = nullptr;
+  MorphOptions options;
+  options.voxels = 16;
+  const MorphField unit = build_morph(A, B, options).field;
+  for (const auto& [scale, shift] : {std::pair{1e-6, 0.0}, std::pair{1.0, 1e5}}) {
+    SCOPED_TRACE(scale);
+    Surface a = A, b = B;
+    for (Surface* s : {&a, &b}) {
+      s->V *= scale;
+      s->V.col(0).array() += shift;
+    }
+    const MorphField moved = build_morph(a, b, options).field;
+    ASSERT_EQ(moved.dims, unit.dims);
+    EXPECT_NEAR(moved.voxel_size, scale * unit.voxel_size, 1e-9 * scale);
+    double worst = 0.0;
+    for (std::size_t q = 0; q < unit.dA.size(); ++q) {
+      worst = std::max(worst, std::abs(moved.dA[q] / scale - unit.dA[q]));
+      worst = std::max(worst, std::abs(moved.dB[q] / scale - unit.dB[q]));
+    }
+    EXPECT_LT(worst, 1e-3 * unit.voxel_size);
+  }
 }
 
 TEST(DistanceMorph, TwoAnalyticShapesNeedNoQueries) {
