@@ -17,6 +17,7 @@
 #include <cmath>
 #include <memory>
 #include <mutex>
+#include <sstream>
 
 #include "mesh/errors.h"
 #include "mesh/thin_features.h"
@@ -166,6 +167,15 @@ MorphField morph_lattice(const Surface& A, const Surface& B, const MorphOptions&
   if (!(extent > 0.0)) throw InvalidInput("morph_lattice: the inputs have an empty bounding box");
   MorphField field;
   field.voxel_size = options.voxel_size > 0.0 ? options.voxel_size : extent / options.voxels;
+  // An explicit voxel size is held to what --voxels allows: a lattice of 31 k voxels a side overflowed the point
+  // count (a crash, whatever --max-memory said), and one under 4 voxels extracts nothing of the shapes.
+  const double across = extent / field.voxel_size;
+  if (!(across >= 4.0 - 1e-9 && across <= 4096.0 + 1e-9)) {
+    std::ostringstream message;
+    message << "morph_lattice: voxel size " << field.voxel_size << " puts " << across
+            << " voxels across the shapes' box (" << extent << "); it must put 4 to 4096";
+    throw InvalidInput(message.str());
+  }
   field.extent = extent;
   const double h = field.voxel_size;
   field.origin = box.min() - options.padding * h * Eigen::Vector3d::Ones();

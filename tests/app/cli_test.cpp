@@ -243,6 +243,10 @@ TEST_F(Cli, NumericOptionsNameTheirRangeAndTheValue) {
   expect_rejected("sphere torus --threads 1.5", "--threads: must be a whole number of at least 0, not '1.5'");
   expect_rejected("sphere torus --trace-smoothing 101",
                   "--trace-smoothing: must be a whole number from 0 to 100, not '101'");
+  // An explicit voxel size is held to --voxels' 4 to 4096 voxels across the shapes: 1e-5 crashed (the lattice's point
+  // count overflowed), 100 extracted nothing.
+  expect_rejected("sphere torus --voxel-size 1e-5", "voxel size 1e-05 puts 200000 voxels across");
+  expect_rejected("sphere torus --voxel-size 100", "voxel size 100 puts 0.02 voxels across");
   const CommandRun r = run_command("map sphere torus -o " + (dir_ / "v").string() + " --voxels abc");
   EXPECT_EQ(r.status, 2) << r.output;
   EXPECT_NE(r.output.find("--voxels: must be a whole number from 4 to 4096, not 'abc'"), std::string::npos) << r.output;
