@@ -454,6 +454,16 @@ PipelineResult run_pipeline(const PipelineOptions& options) {
                          std::to_string(options.vim.samples) + " samples per surface), over the limit of " +
                          gib(double(options.max_memory_bytes)) + "; lower --vim-samples");
   }
+  if (options.max_memory_bytes > 0) {
+    // The lattice alone, before the morph allocates it (the estimate below comes only after the extraction counts):
+    // 2000 voxels a side asks for 8 billion points.
+    const std::int64_t points = morph_lattice(A, B, options.morph).point_count();
+    const long long bytes = estimate_peak_memory(points, 0, 0);
+    if (bytes > options.max_memory_bytes)
+      throw InvalidInput("--max-memory: the lattice alone (" + std::to_string(points) + " points) needs about " +
+                         gib(double(bytes)) + ", over the limit of " + gib(double(options.max_memory_bytes)) +
+                         "; lower --voxels or raise --voxel-size");
+  }
   const SurfaceCheck input_checks[2] = {input_check_a, input_check_b};  // the topology the thin features keep
   const MorphResult morph = options.morph_method == "vim"
                                 ? build_vim_morph(A, B, options.morph, options.vim, options.extract.time_steps)

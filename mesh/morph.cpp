@@ -50,7 +50,7 @@ openvdb::FloatGrid::Ptr signed_distance_grid(const Surface& surface, const Morph
 // Copies grid values at lattice points into a dense array (x fastest), one accessor per task; the grid is in voxel
 // units (signed_distance_grid), the array in the surfaces' own.
 void sample_lattice(const openvdb::FloatGrid& grid, const MorphField& field, std::vector<float>& out) {
-  out.assign(std::size_t(field.dims.prod()), 0.0f);
+  out.assign(std::size_t(field.point_count()), 0.0f);
   const float h = float(field.voxel_size);
   tbb::parallel_for(tbb::blocked_range<int>(0, field.dims.z()), [&](const tbb::blocked_range<int>& range) {
     auto accessor = grid.getConstAccessor();
@@ -103,7 +103,7 @@ std::vector<std::uint8_t> crossing_corners(const MorphField& field) {
 
 // A signed distance function at every lattice point (analytic shapes, test fields).
 void sample_distance(const SignedDistance& distance, const MorphField& field, std::vector<float>& out) {
-  out.assign(std::size_t(field.dims.prod()), 0.0f);
+  out.assign(std::size_t(field.point_count()), 0.0f);
   tbb::parallel_for(tbb::blocked_range<int>(0, field.dims.z()), [&](const tbb::blocked_range<int>& range) {
     for (int k = range.begin(); k != range.end(); ++k)
       for (int j = 0; j < field.dims.y(); ++j)
@@ -205,7 +205,7 @@ MorphResult build_morph(const Surface& A, const Surface& B, const MorphOptions& 
       sample_lattice(*grid, field, values);
     }
   }
-  result.lattice_points = std::int64_t(field.dims.x()) * field.dims.y() * field.dims.z();
+  result.lattice_points = field.point_count();
   std::unique_ptr<SurfaceLocator> owned[2];
   const SurfaceLocator* locators[2] = {nullptr, nullptr};
   for (int which = 0; which < 2; ++which)

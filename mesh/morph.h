@@ -62,6 +62,10 @@ struct MorphField {
   std::vector<float> levels;
   int time_levels = 0;
 
+  /// Lattice points, dims.x * dims.y * dims.z, in 64 bits (dims.prod() is an int, which 1291 points a side
+  /// overflow).
+  std::int64_t point_count() const { return std::int64_t(dims.x()) * dims.y() * dims.z(); }
+
   std::int64_t index(int i, int j, int k) const {
     return i + std::int64_t(dims.x()) * (j + std::int64_t(dims.y()) * k);
   }

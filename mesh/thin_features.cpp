@@ -184,8 +184,9 @@ DisjointSets sign_regions(const MorphField& field, const std::vector<float>& val
 
 LatticeTopology lattice_topology(const MorphField& field, const std::vector<float>& values) {
   const Eigen::Vector3i& n = field.dims;
-  if (values.size() != std::size_t(n.prod()))
-    throw InvalidInput("lattice_topology: values must have dims.prod() = " + std::to_string(n.prod()) + " entries");
+  if (values.size() != std::size_t(field.point_count()))
+    throw InvalidInput("lattice_topology: values must have point_count() = " + std::to_string(field.point_count()) +
+                       " entries");
   const KuhnStar star(n);
   std::vector<std::int64_t> chi(std::size_t(std::max(n.z(), 1)), 0);
   for_each_crossed_cube(field, values, {}, star, [&](int k, std::int64_t q) {
@@ -371,8 +372,8 @@ ThinFeatureResult keep_thin_features(const SurfaceLocator& locator, const MorphF
                                      const LatticeTopology& target, const ThinFeatureOptions& options) {
   ThinFeatureResult result;
   const Eigen::Vector3i& n = field.dims;
-  if (values.size() != std::size_t(n.prod()))
-    throw InvalidInput("keep_thin_features: values must have dims.prod() = " + std::to_string(n.prod()) +
+  if (values.size() != std::size_t(field.point_count()))
+    throw InvalidInput("keep_thin_features: values must have point_count() = " + std::to_string(field.point_count()) +
                        " entries (got " + std::to_string(values.size()) + ")");
   if (!options.enabled || n.minCoeff() < 2) return result;
   const double h = field.voxel_size;

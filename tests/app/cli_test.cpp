@@ -233,6 +233,12 @@ TEST_F(Cli, MemoryGuardRefusesBeforeAllocating) {
   // The variational morph's dense constraint system is refused before it is built.
   expect_rejected("sphere torus --morph vim --vim-samples 5000 --max-memory 1G", "--vim-samples");
   expect_rejected("sphere torus --morph spline", "--morph");
+  // The lattice is checked before the morph allocates it: 2000 voxels a side is 8 billion points.
+  const fs::path big = dir_ / "big";
+  const CommandRun r = run_command("map sphere torus -o " + big.string() + " --voxels 2000 --max-memory 8G");
+  EXPECT_EQ(r.status, 2) << r.output;
+  EXPECT_NE(r.output.find("--max-memory: the lattice alone (8"), std::string::npos) << r.output;
+  EXPECT_FALSE(fs::exists(big));
 }
 
 TEST_F(Cli, NumericOptionsNameTheirRangeAndTheValue) {
