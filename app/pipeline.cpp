@@ -167,7 +167,8 @@ void write_labels(const std::string& path, const Eigen::MatrixXd& labels) {
 // point on the extracted B, a point of a boundary face of the 4D mesh, from which `labels_at` (trace or
 // interpolation, by method) gives its label. No provenance in the 4D mesh: source_tet and source_edge are zero.
 SliceMesh user_target_mesh(const PipelineOptions& options, const Frame& frame_b, const SliceMesh& extracted,
-                           const std::function<Eigen::MatrixXd(const std::vector<MeshPoint>&)>& labels_at) {
+                           const std::function<Eigen::MatrixXd(const std::vector<MeshPoint>&)>& labels_at,
+                           bool& reoriented) {
   const Surface user = read_surface(options.target_mesh);
   validate_surface(user, false);
   Surface on_b;
@@ -178,6 +179,26 @@ SliceMesh user_target_mesh(const PipelineOptions& options, const Frame& frame_b,
   SliceMesh out;
   out.V = frame_b.to_frame(user.V);
   out.F = user.F;
+  // A mesh wound inward is turned, as the inputs are (it may be open, so its winding is compared with the extracted
+  // B's, outward, face by face, weighted by area): the fold counts and the repair take its winding as outward, and an
+  // inward bunny_closed.obj counted 59619 folded triangles instead of 260.
+  {
+    Eigen::MatrixXd centroids(out.F.rows(), 3);
+    for (Eigen::Index f = 0; f < out.F.rows(); ++f)
+      centroids.row(f) = (out.V.row(out.F(f, 0)) + out.V.row(out.F(f, 1)) + out.V.row(out.F(f, 2))) / 3.0;
+    const std::vector<SurfaceHit> near = locator.closest_all(centroids);
+    double agreement = 0.0;
+    for (Eigen::Index f = 0; f < out.F.rows(); ++f) {
+      const auto normal = [](const Eigen::MatrixXd& V, const auto& F, Eigen::Index t) {
+        const Eigen::Vector3d a = V.row(F(t, 0)), b = V.row(F(t, 1)), c = V.row(F(t, 2));
+        return Eigen::Vector3d((b - a).cross(c - a));
+      };
+      agreement +=
+          normal(out.V, out.F, f).dot(normal(extracted.V, extracted.F, near[std::size_t(f)].face).normalized());
+    }
+    reoriented = agreement < 0.0;
+    if (reoriented) out.F.col(1).swap(out.F.col(2));
+  }
   const std::vector<SurfaceHit> hits = locator.closest_all(out.V);
   std::vector<MeshPoint> points(hits.size());
   for (std::size_t i = 0; i < hits.size(); ++i) {
@@ -702,19 +723,23 @@ PipelineResult run_pipeline(const PipelineOptions& options) {
   const SurfaceCheck extracted_check_b = check_surface(Eigen::MatrixXi(result.target.F), extracted_vertices);
   const double extracted_check_b_seconds = seconds_since(check_b_start);
   const bool user_target = !options.target_mesh.empty();
+  bool target_mesh_reoriented = false;
   if (user_target) {
-    result.target = user_target_mesh(options, frame_b, result.target, [&](const std::vector<MeshPoint>& points) {
-      Eigen::MatrixXd labels(Eigen::Index(points.size()), 3);
-      if (options.method == "trace") {
-        const TraceResult traced = onto_a(tracer->trace(points));
-        labels = traced.end;
-        add_trace(traced);
-      } else {
-        for (std::size_t i = 0; i < points.size(); ++i)
-          labels.row(Eigen::Index(i)) = interpolate(points[i], transport.labels);
-      }
-      return labels;
-    });
+    result.target = user_target_mesh(
+        options, frame_b, result.target,
+        [&](const std::vector<MeshPoint>& points) {
+          Eigen::MatrixXd labels(Eigen::Index(points.size()), 3);
+          if (options.method == "trace") {
+            const TraceResult traced = onto_a(tracer->trace(points));
+            labels = traced.end;
+            add_trace(traced);
+          } else {
+            for (std::size_t i = 0; i < points.size(); ++i)
+              labels.row(Eigen::Index(i)) = interpolate(points[i], transport.labels);
+          }
+          return labels;
+        },
+        target_mesh_reoriented);
   } else {
     trace_target_labels(result.target);
   }
@@ -838,6 +863,7 @@ PipelineResult run_pipeline(const PipelineOptions& options) {
     report["inputs"][side + "_reoriented"] = input_notes.reoriented[which];
     report["inputs"][side + "_welded_vertices"] = input_notes.welded[which];
   }
+  if (user_target) report["inputs"]["target_mesh_reoriented"] = target_mesh_reoriented;
   report["options"] = {{"voxels", options.morph.voxels},
                        {"voxel_size", morph.field.voxel_size},
                        {"padding", options.morph.padding},

@@ -339,6 +339,18 @@ TEST(Pipeline, SourceWithInwardFacesMapsAsTheSameSolid) {
   EXPECT_LT(folded("out.obj"), triangles("out.obj") / 20);
   const auto coverage = [&](const char* name) { return reports[name]["stretch"]["coverage"].get<double>(); };
   EXPECT_NEAR(coverage("in.obj"), coverage("out.obj"), 0.05);
+  // The same for the user's own target mesh (--target-mesh, possibly open: its winding is compared with the
+  // extracted target's), which keeps its vertices: the turned mesh is measured exactly as the outward one.
+  std::map<std::string, nlohmann::json> user;
+  for (const char* name : {"out.obj", "in.obj"}) {
+    PipelineOptions o = small_options("sphere", "torus", "cg-amg");
+    o.target_mesh = (dir / name).string();
+    user[name] = nlohmann::json::parse(run_pipeline(o).report_json);
+  }
+  EXPECT_FALSE(user["out.obj"]["inputs"]["target_mesh_reoriented"].get<bool>());
+  EXPECT_TRUE(user["in.obj"]["inputs"]["target_mesh_reoriented"].get<bool>());
+  EXPECT_EQ(user["in.obj"]["stretch"]["folded"], user["out.obj"]["stretch"]["folded"]);
+  EXPECT_EQ(user["in.obj"]["stretch"]["coverage"], user["out.obj"]["stretch"]["coverage"]);
   std::filesystem::remove_all(dir);
 }
 
