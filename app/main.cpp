@@ -23,7 +23,8 @@ int main(int argc, char** argv) {
   options.progress = isatty(fileno(stderr)) != 0;
 
   CLI::App* map = app.add_subcommand("map", "Map SOURCE onto TARGET and transfer its texture");
-  map->add_option("SOURCE", options.source, "Mesh file (.obj/.off/.ply) or built-in shape (sphere, torus, two-spheres)")
+  map->add_option("SOURCE", options.source,
+                  "Mesh file (.obj/.off/.ply/.stl) or built-in shape (sphere, torus, two-spheres)")
       ->required();
   map->add_option("TARGET", options.target, "Mesh file or built-in shape")->required();
   map->add_option("-o,--output", options.output_dir, "Output directory")->required();
@@ -56,7 +57,7 @@ int main(int argc, char** argv) {
   int render_checker = 0;
   bool render_shaded = false;
   morphmap::RenderOptions& render_options = options.render_options;
-  render->add_option("MESH", render_mesh, "Mesh file (.obj with UVs and MTL texture, .off, .ply)")->required();
+  render->add_option("MESH", render_mesh, "Mesh file (.obj with UVs and MTL texture, .off, .ply, .stl)")->required();
   render->add_option("-o,--output", render_png, "PNG file to write")->required();
   render->add_option("--heat", render_labels, "labels.txt of MESH: colour by per-triangle L2 stretch (needs --source)");
   render->add_option("--source", render_source, "The source surface of the labels (file or built-in shape)");

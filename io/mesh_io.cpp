@@ -459,6 +459,65 @@ Surface read_off(const std::string& path) {
 }
 
 // ---------------------------------------------------------------------------------------------------------------
+// STL (ASCII and binary). Every facet carries its own three corners; corners at bitwise-equal positions are welded
+// into shared vertices (what the format means, and what the pipeline's closedness check needs). The facet normals are
+// ignored: the corners' order gives the orientation, as in the other formats. Written by hand: no Debian package
+// reads STL short of Assimp, a large dependency for a forty-line format.
+
+Surface read_stl(const std::string& path) {
+  std::string data = read_whole_file(path);
+  std::vector<double> positions;
+  const bool ascii_header = data.compare(0, 5, "solid") == 0;
+  std::uint32_t count = 0;
+  if (data.size() >= 84) std::memcpy(&count, data.data() + 80, sizeof count);
+  // A binary file may also start with "solid" in its 80-byte header; its size settles which it is.
+  if (data.size() >= 84 && data.size() == 84 + 50 * std::size_t(count)) {
+    positions.reserve(9 * std::size_t(count));
+    for (std::uint32_t f = 0; f < count; ++f) {
+      const char* facet = data.data() + 84 + 50 * std::size_t(f) + 12;  // after the normal
+      for (int k = 0; k < 9; ++k) {
+        float x = 0.0f;
+        std::memcpy(&x, facet + 4 * k, sizeof x);
+        positions.push_back(double(x));
+      }
+    }
+  } else if (ascii_header) {
+    const std::vector<const char*> lines = split_lines(data);
+    int in_loop = -1;  // corners of the current loop, -1 outside one
+    for (std::size_t l = 0; l < lines.size(); ++l) {
+      LineCursor cursor(path, static_cast<int>(l + 1), lines[l]);
+      const std::string keyword = cursor.word();
+      if (keyword == "outer") {
+        in_loop = 0;
+      } else if (keyword == "vertex") {
+        if (in_loop < 0) cursor.fail("vertex outside a facet's loop");
+        for (int c = 0; c < 3; ++c) {
+          double x = 0.0;
+          if (!cursor.number(x)) cursor.fail("vertex needs 3 coordinates");
+          positions.push_back(x);
+        }
+        ++in_loop;
+      } else if (keyword == "endloop") {
+        if (in_loop != 3) cursor.fail("facet has " + std::to_string(std::max(in_loop, 0)) + " vertices, not 3");
+        in_loop = -1;
+      }
+    }
+    if (in_loop >= 0) throw InvalidInput(path + ": file ends inside a facet");
+  } else {
+    throw InvalidInput(path + ": not an STL file (no 'solid' header, and " + std::to_string(data.size()) +
+                       " bytes is not a binary STL's 84 + 50 per facet)");
+  }
+  Surface surface;
+  surface.name = path;
+  surface.V = to_matrix(positions, 3);
+  surface.F.resize(surface.V.rows() / 3, 3);
+  for (Eigen::Index f = 0; f < surface.F.rows(); ++f)
+    for (int c = 0; c < 3; ++c) surface.F(f, c) = int(3 * f + c);
+  weld_coincident_vertices(surface);
+  return surface;
+}
+
+// ---------------------------------------------------------------------------------------------------------------
 // PLY
 
 enum class PlyType { Int8, UInt8, Int16, UInt16, Int32, UInt32, Float32, Float64 };
@@ -860,8 +919,10 @@ Surface read_surface(const std::string& path) {
     surface = read_off(path);
   } else if (extension == ".ply") {
     surface = read_ply(path);
+  } else if (extension == ".stl") {
+    surface = read_stl(path);
   } else {
-    throw InvalidInput(path + ": unknown mesh file extension '" + extension + "' (expected .obj, .off or .ply)");
+    throw InvalidInput(path + ": unknown mesh file extension '" + extension + "' (expected .obj, .off, .ply or .stl)");
   }
   // Empty, non-finite and out-of-range input is rejected here, with the path in the message.
   validate_surface(surface, false);

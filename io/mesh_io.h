@@ -1,4 +1,4 @@
-// Mesh files: OBJ (per-corner UVs, texture named by the MTL), OFF, PLY (ASCII and binary little-endian).
+// Mesh files: OBJ (per-corner UVs, texture named by the MTL), OFF, PLY (ASCII and binary little-endian), STL.
 #pragma once
 
 #include <Eigen/Core>
@@ -10,8 +10,8 @@
 
 namespace morphmap {
 
-/// Reads a surface by extension (.obj, .off, .ply, case-insensitive). Polygons are fan-triangulated.
-/// Throws IoError (missing/unreadable) or InvalidInput (malformed, empty, NaN/Inf, index out of range),
+/// Reads a surface by extension (.obj, .off, .ply, .stl, case-insensitive). Polygons are fan-triangulated; STL corners
+/// are welded. Throws IoError (missing/unreadable) or InvalidInput (malformed, empty, NaN/Inf, index out of range),
 /// each a one-line message starting with the path. Does not check closedness (validate_surface does).
 Surface read_surface(const std::string& path);
 

@@ -182,14 +182,50 @@ TEST_F(MeshIoTest, PlyBinaryLittleEndian) {
   EXPECT_GT(signed_volume(s.V, s.F), 0.0);
 }
 
+TEST_F(MeshIoTest, StlAsciiAndBinaryAreWeldedIntoTheClosedSurface) {
+  // The unit tetrahedron, each facet with its own corners (outward order), as ASCII and as binary STL (whose header
+  // starts with "solid" too: the size tells them apart).
+  const double corner[4][3] = {{0, 0, 0}, {1, 0, 0}, {0, 1, 0}, {0, 0, 1}};
+  const int facets[4][3] = {{0, 2, 1}, {0, 1, 3}, {0, 3, 2}, {1, 2, 3}};
+  std::string ascii = "solid tet\n", binary = std::string("solid but binary").append(64, ' ') + bytes(std::uint32_t(4));
+  for (const auto& f : facets) {
+    ascii += " facet normal 0 0 0\n  outer loop\n";
+    binary += bytes(0.0f) + bytes(0.0f) + bytes(0.0f);
+    for (int c = 0; c < 3; ++c) {
+      const double* p = corner[f[c]];
+      ascii += "   vertex " + std::to_string(p[0]) + " " + std::to_string(p[1]) + " " + std::to_string(p[2]) + "\n";
+      binary += bytes(float(p[0])) + bytes(float(p[1])) + bytes(float(p[2]));
+    }
+    ascii += "  endloop\n endfacet\n";
+    binary += bytes(std::uint16_t(0));
+  }
+  ascii += "endsolid tet\n";
+  for (const std::string& path : {write("a.stl", ascii), write("b.STL", binary)}) {
+    SCOPED_TRACE(path);
+    const Surface s = read_surface(path);
+    ASSERT_EQ(s.V.rows(), 4);
+    ASSERT_EQ(s.F.rows(), 4);
+    const SurfaceCheck check = validate_surface(s, true);
+    EXPECT_EQ(check.euler(), 2);
+    EXPECT_NEAR(signed_volume(s.V, s.F), 1.0 / 6.0, 1e-12);
+  }
+  EXPECT_NE(error_of<InvalidInput>(write("c.stl", "not a mesh")).find("not an STL file"), std::string::npos);
+  EXPECT_NE(error_of<InvalidInput>(write("d.stl", "solid x\nfacet normal 0 0 1\nouter loop\nvertex 0 0 0\nendloop\n"))
+                .find("line 5: facet has 1 vertices, not 3"),
+            std::string::npos);
+  EXPECT_NE(error_of<InvalidInput>(write("e.stl", "solid x\nouter loop\nvertex 0 0 0\nvertex 1 0 0\n"))
+                .find("file ends inside a facet"),
+            std::string::npos);
+}
+
 TEST_F(MeshIoTest, MissingFileIsIoError) {
   const std::string m = error_of<IoError>((dir_ / "nope.off").string());
   EXPECT_NE(m.find("cannot open file"), std::string::npos);
 }
 
 TEST_F(MeshIoTest, UnknownExtensionIsInvalidInput) {
-  const std::string m = error_of<InvalidInput>(write("x.stl", "solid"));
-  EXPECT_NE(m.find("unknown mesh file extension '.stl'"), std::string::npos) << m;
+  const std::string m = error_of<InvalidInput>(write("x.3ds", "solid"));
+  EXPECT_NE(m.find("unknown mesh file extension '.3ds' (expected .obj, .off, .ply or .stl)"), std::string::npos) << m;
 }
 
 TEST_F(MeshIoTest, EmptyMeshIsInvalidInput) {
