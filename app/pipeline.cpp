@@ -1149,7 +1149,18 @@ PipelineResult run_pipeline(const PipelineOptions& options) {
   result.report_json = report.dump(2);
   if (out) {
     write_text_atomically(out->staged("report.json"), result.report_json + "\n");
-    out->commit({"report.json"});
+    // An earlier map's outputs in the folder that this run does not write (target.ply without --ply now, slices at
+    // other times) would stand beside a report that does not describe them.
+    out->commit({"report.json"}, [](const std::string& name) {
+      const auto starts = [&](const char* prefix) { return name.rfind(prefix, 0) == 0; };
+      const auto ends = [&](const char* suffix) {
+        const std::size_t n = std::char_traits<char>::length(suffix);
+        return name.size() >= n && name.compare(name.size() - n, n, suffix) == 0;
+      };
+      return name == "report.json" || name == "labels.txt" || name == "target.obj" || name == "target.mtl" ||
+             name == "target.ply" || name == "contact_sheet.png" || (starts("slice_") && ends(".obj")) ||
+             (starts("texture.") && name.find('.', 8) == std::string::npos);
+    });
     progress.stage("write", seconds["write"]);
   }
   return result;

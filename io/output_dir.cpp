@@ -65,7 +65,8 @@ std::string OutputDir::staged(const std::string& name) {
   return (fs::path(staging_) / name).string();
 }
 
-void OutputDir::commit(const std::vector<std::string>& last) {
+void OutputDir::commit(const std::vector<std::string>& last,
+                       const std::function<bool(const std::string&)>& earlier_output) {
   if (committed_) return;
   // Whatever landed in the staging folder is output, also files written there without staged().
   std::vector<std::string> present;
@@ -83,6 +84,29 @@ void OutputDir::commit(const std::vector<std::string>& last) {
     if (std::binary_search(present.begin(), present.end(), name) &&
         std::find(order.begin(), order.end(), name) == order.end()) {
       order.push_back(name);
+    }
+  }
+  if (earlier_output) {
+    std::vector<std::string> stale;
+    for (fs::directory_iterator it(dir_, ec), end; !ec && it != end; it.increment(ec)) {
+      const std::string name = it->path().filename().string();
+      if (it->is_regular_file() && earlier_output(name) && !std::binary_search(present.begin(), present.end(), name))
+        stale.push_back(name);
+    }
+    if (ec) throw IoError(dir_ + ": cannot list output directory (" + ec.message() + ")");
+    // The reports first: without one the folder is recognisably incomplete until the new one lands.
+    std::stable_partition(stale.begin(), stale.end(), [&](const std::string& name) {
+      return std::find(last.begin(), last.end(), name) != last.end();
+    });
+    for (const std::string& name : last) {
+      if (std::binary_search(present.begin(), present.end(), name)) {
+        fs::remove(fs::path(dir_) / name, ec);  // replaced below anyway; removed now for the order above
+        if (ec) throw IoError((fs::path(dir_) / name).string() + ": cannot remove (" + ec.message() + ")");
+      }
+    }
+    for (const std::string& name : stale) {
+      fs::remove(fs::path(dir_) / name, ec);
+      if (ec) throw IoError((fs::path(dir_) / name).string() + ": cannot remove earlier output (" + ec.message() + ")");
     }
   }
   for (const std::string& name : order) {

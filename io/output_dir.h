@@ -2,6 +2,7 @@
 // renamed into place only when the whole run succeeded, so no half-written output is ever seen.
 #pragma once
 
+#include <functional>
 #include <string>
 #include <vector>
 
@@ -19,8 +20,12 @@ class OutputDir {
   /// Path in the staging folder at which to write the output `name` (a plain file name).
   std::string staged(const std::string& name);
   /// Renames every staged file into `dir` (each rename atomic; report.json-like files named in
-  /// `last` are renamed after all others, so their presence means the rest is complete).
-  void commit(const std::vector<std::string>& last = {});
+  /// `last` are renamed after all others, so their presence means the rest is complete). With `earlier_output`,
+  /// the files of `dir` it names (an earlier run's outputs) that this run does not write are removed first, after the
+  /// `last` files, so that a rerun with fewer outputs (no --ply, other slices) leaves none of the old ones beside the
+  /// new report, and a crash in between leaves no report.
+  void commit(const std::vector<std::string>& last = {},
+              const std::function<bool(const std::string&)>& earlier_output = {});
   const std::string& dir() const { return dir_; }
 
  private:

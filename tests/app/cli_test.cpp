@@ -241,6 +241,22 @@ TEST_F(Cli, MemoryGuardRefusesBeforeAllocating) {
   EXPECT_FALSE(fs::exists(big));
 }
 
+TEST_F(Cli, RerunLeavesNoEarlierOutputsBesideTheNewReport) {
+  // A map with --ply and a slice, then one without either into the same folder: the old target.ply and slice would
+  // stand beside a report that does not describe them. The user's own files stay.
+  const fs::path out = dir_ / "rerun";
+  const std::string map = "map sphere torus -o " + out.string() + " --voxels 12 --time-steps 3";
+  ASSERT_EQ(run_command(map + " --ply --slices 0.25").status, 0);
+  ASSERT_TRUE(fs::exists(out / "target.ply") && fs::exists(out / "slice_0.25.obj"));
+  std::ofstream(out / "notes.txt") << "mine";
+  ASSERT_EQ(run_command(map + " --slices 0.5").status, 0);
+  EXPECT_FALSE(fs::exists(out / "target.ply"));
+  EXPECT_FALSE(fs::exists(out / "slice_0.25.obj"));
+  EXPECT_TRUE(fs::exists(out / "slice_0.5.obj"));
+  EXPECT_TRUE(fs::exists(out / "notes.txt"));
+  EXPECT_TRUE(fs::exists(out / "report.json"));
+}
+
 TEST_F(Cli, NumericOptionsNameTheirRangeAndTheValue) {
   // CLI11's validators called a word "not in range" and printed the largest double in full as the bound.
   expect_rejected("sphere torus --trace-step -1", "--trace-step: must be a positive number, not '-1'");

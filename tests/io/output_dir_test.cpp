@@ -73,6 +73,25 @@ TEST_F(OutputDirTest, CommitMovesEverythingAndRemovesStaging) {
   EXPECT_EQ(read(root_ / "out" / "mesh.obj"), "mesh");
 }
 
+TEST_F(OutputDirTest, CommitRemovesAnEarlierRunsOutputsThatThisRunDoesNotWrite) {
+  // An earlier run wrote a slice and a PLY; this one writes neither. Files the predicate does not name stay.
+  const fs::path dir = root_ / "rerun";
+  fs::create_directories(dir);
+  for (const char* name : {"report.json", "target.obj", "target.ply", "slice_0.25.obj", "notes.txt"})
+    std::ofstream(dir / name) << "old";
+  {
+    OutputDir out(dir.string());
+    std::ofstream(out.staged("target.obj")) << "new";
+    std::ofstream(out.staged("slice_0.5.obj")) << "new";
+    std::ofstream(out.staged("report.json")) << "new";
+    out.commit({"report.json"}, [](const std::string& name) { return name != "notes.txt"; });
+  }
+  EXPECT_EQ(entries(dir), (std::vector<std::string>{"notes.txt", "report.json", "slice_0.5.obj", "target.obj"}));
+  EXPECT_EQ(read(dir / "report.json"), "new");
+  EXPECT_EQ(read(dir / "target.obj"), "new");
+  EXPECT_EQ(read(dir / "notes.txt"), "old");
+}
+
 TEST_F(OutputDirTest, TwoAtOnceUseDifferentStagingFolders) {
   OutputDir a(root_.string()), b(root_.string());
   EXPECT_NE(fs::path(a.staged("x")).parent_path(), fs::path(b.staged("x")).parent_path());
