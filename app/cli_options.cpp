@@ -30,25 +30,6 @@ std::string shortest(double x) {
   return std::string(buffer, result.ptr);
 }
 
-}  // namespace
-
-CLI::Validator whole_number(int lo, int hi) {
-  const bool bounded = hi != std::numeric_limits<int>::max();
-  const std::string range =
-      bounded ? "from " + std::to_string(lo) + " to " + std::to_string(hi) : "of at least " + std::to_string(lo);
-  return CLI::Validator(
-      [lo, hi, range](std::string& text) -> std::string {
-        long long value = 0;
-        const auto result = std::from_chars(text.data(), text.data() + text.size(), value);
-        const bool whole = !text.empty() && result.ec == std::errc() && result.ptr == text.data() + text.size();
-        if (whole && value >= lo && value <= hi) return {};
-        return "must be a whole number " + range + ", not " + in_quotes(text);
-      },
-      bounded ? "INT in [" + std::to_string(lo) + ", " + std::to_string(hi) + "]" : "INT >= " + std::to_string(lo));
-}
-
-namespace {
-
 /// A finite number above zero (`strict`) or at least zero.
 CLI::Validator real_above_zero(bool strict) {
   return CLI::Validator(
@@ -76,6 +57,21 @@ CLI::Validator real_in(double lo, double hi) {
 }
 
 }  // namespace
+
+CLI::Validator whole_number(int lo, int hi) {
+  const bool bounded = hi != std::numeric_limits<int>::max();
+  const std::string range =
+      bounded ? "from " + std::to_string(lo) + " to " + std::to_string(hi) : "of at least " + std::to_string(lo);
+  return CLI::Validator(
+      [lo, hi, range](std::string& text) -> std::string {
+        long long value = 0;
+        const auto result = std::from_chars(text.data(), text.data() + text.size(), value);
+        const bool whole = !text.empty() && result.ec == std::errc() && result.ptr == text.data() + text.size();
+        if (whole && value >= lo && value <= hi) return {};
+        return "must be a whole number " + range + ", not " + in_quotes(text);
+      },
+      bounded ? "INT in [" + std::to_string(lo) + ", " + std::to_string(hi) + "]" : "INT >= " + std::to_string(lo));
+}
 
 void add_pipeline_options(CLI::App& cmd, PipelineOptions& o) {
   cmd.add_option("--voxels", o.morph.voxels, "Lattice voxels across the larger side of the union bounding box")

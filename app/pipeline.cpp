@@ -86,6 +86,13 @@ struct InputNotes {
   std::int64_t welded[2] = {0, 0};      // vertices merged into another at the same position (an open mesh closed)
 };
 
+// make_shape(spec, fit), and in `placed` the spec as placed (report.json's inputs.*_shape), from which make_shape
+// rebuilds the same surface without the box.
+Surface placed_shape(const ShapeSpec& spec, const std::optional<Eigen::AlignedBox3d>& fit, std::string& placed) {
+  placed = shape_spec_string(resolve_shape_spec(spec, fit));
+  return make_shape(spec, fit);
+}
+
 // validate_surface(surface, true); a mesh that is not closed as read but is once vertices at bitwise-equal positions
 // are merged (exported with its vertices split at texture or normal seams, or as a triangle soup) is taken welded.
 // Otherwise the error is the mesh's as read.
@@ -117,18 +124,8 @@ void load_inputs(const PipelineOptions& options, Surface& A, Surface& B, Surface
   if (b_builtin) b_spec = parse_shape_spec(options.target);
   if (!b_builtin) B = read_surface(options.target);
   if (!a_builtin) A = read_surface(options.source);
-  if (b_builtin) {
-    const ShapeSpec placed = resolve_shape_spec(*b_spec, a_builtin ? std::nullopt : std::optional(bounding_box(A.V)));
-    B = make_shape(placed, std::nullopt);
-    B.name = shape_spec_string(*b_spec);  // messages name the shape as given
-    notes.shape[1] = shape_spec_string(placed);
-  }
-  if (a_builtin) {
-    const ShapeSpec placed = resolve_shape_spec(*a_spec, std::optional(bounding_box(B.V)));
-    A = make_shape(placed, std::nullopt);
-    A.name = shape_spec_string(*a_spec);
-    notes.shape[0] = shape_spec_string(placed);
-  }
+  if (b_builtin) B = placed_shape(*b_spec, a_builtin ? std::nullopt : std::optional(bounding_box(A.V)), notes.shape[1]);
+  if (a_builtin) A = placed_shape(*a_spec, std::optional(bounding_box(B.V)), notes.shape[0]);
   check_a = validate_welding(A, notes.welded[0]);
   check_b = validate_welding(B, notes.welded[1]);
   // A mesh whose faces wind inward is mapped as the same solid, its faces turned (measured: a sphere -> bunny map
@@ -187,12 +184,12 @@ SliceMesh user_target_mesh(const PipelineOptions& options, const Frame& frame_b,
     for (Eigen::Index f = 0; f < out.F.rows(); ++f)
       centroids.row(f) = (out.V.row(out.F(f, 0)) + out.V.row(out.F(f, 1)) + out.V.row(out.F(f, 2))) / 3.0;
     const std::vector<SurfaceHit> near = locator.closest_all(centroids);
+    const auto normal = [](const Eigen::MatrixXd& V, const auto& F, Eigen::Index t) {
+      const Eigen::Vector3d a = V.row(F(t, 0)), b = V.row(F(t, 1)), c = V.row(F(t, 2));
+      return Eigen::Vector3d((b - a).cross(c - a));
+    };
     double agreement = 0.0;
     for (Eigen::Index f = 0; f < out.F.rows(); ++f) {
-      const auto normal = [](const Eigen::MatrixXd& V, const auto& F, Eigen::Index t) {
-        const Eigen::Vector3d a = V.row(F(t, 0)), b = V.row(F(t, 1)), c = V.row(F(t, 2));
-        return Eigen::Vector3d((b - a).cross(c - a));
-      };
       agreement +=
           normal(out.V, out.F, f).dot(normal(extracted.V, extracted.F, near[std::size_t(f)].face).normalized());
     }
@@ -341,10 +338,6 @@ nlohmann::json seams_json(const SeamResult& r, const SeamOptions& o) {
           {"seconds", r.seconds}};
 }
 
-}  // namespace
-
-namespace {
-
 // The source shape `map` placed for `source` (report.json's inputs.source_shape beside `target`), if that report is
 // there, readable and of the same source.
 std::optional<ShapeSpec> mapped_source_shape(const std::string& target, const std::string& source) {
@@ -374,15 +367,14 @@ StretchInputs read_stretch_inputs(const std::string& target, const std::string& 
   validate_surface(B, false);
   if (is_builtin_shape(source)) {
     const ShapeSpec spec = parse_shape_spec(source);
-    ShapeSpec placed = spec;
-    if (!spec.center || !spec.size) {
-      const std::optional<ShapeSpec> mapped = mapped_source_shape(target, source);
-      inputs.source_fitted_to_target = !mapped;
-      placed = mapped ? *mapped : resolve_shape_spec(spec, std::optional(bounding_box(B.V)));
+    const std::optional<ShapeSpec> mapped =
+        spec.center && spec.size ? std::nullopt : mapped_source_shape(target, source);
+    if (mapped) {
+      A = placed_shape(*mapped, std::nullopt, inputs.source_shape);
+    } else {
+      inputs.source_fitted_to_target = !spec.center || !spec.size;
+      A = placed_shape(spec, std::optional(bounding_box(B.V)), inputs.source_shape);
     }
-    A = make_shape(placed, std::nullopt);
-    A.name = shape_spec_string(spec);
-    inputs.source_shape = shape_spec_string(placed);
   } else {
     A = read_surface(source);
   }
@@ -1107,11 +1099,11 @@ PipelineResult run_pipeline(const PipelineOptions& options) {
               result.target_seams.FUV, mtl_name);
     if (options.write_ply) {
       const SeamResult& t = result.target_seams;
-      if (t.FUV.rows() == t.F.rows() && t.F.rows() > 0) {
+      if (t.FUV.rows() > 0) {
         const PerVertexUvMesh ply = per_vertex_uv(target_world, t.F, t.UV, t.FUV);
         write_ply(out->staged("target.ply"), ply.V, ply.F, ply.UV);
       } else {
-        write_ply(out->staged("target.ply"), target_world, t.F, t.UV.rows() == t.V.rows() ? t.UV : Eigen::MatrixXd());
+        write_ply(out->staged("target.ply"), target_world, t.F, Eigen::MatrixXd());
       }
     }
     write_labels(out->staged("labels.txt"), seam_preimages);

@@ -120,7 +120,9 @@ void append_torus(const Eigen::Vector3d& center, double major, double minor, int
   }
 }
 
-std::string shape_spec_string_of(const ShapeSpec& spec) {
+}  // namespace
+
+std::string shape_spec_string(const ShapeSpec& spec) {
   const ShapeSpec defaults;
   std::vector<std::string> items;
   if (spec.size) items.push_back("size=" + format_number(*spec.size));
@@ -139,6 +141,8 @@ std::string shape_spec_string_of(const ShapeSpec& spec) {
   for (std::size_t i = 0; i < items.size(); ++i) text += (i == 0 ? ":" : ",") + items[i];
   return text;
 }
+
+namespace {
 
 void check_spec(const std::string& text, const ShapeSpec& spec) {
   if (!known_kind(spec.kind)) fail(text, "unknown kind '" + spec.kind + "' (expected sphere, torus or two-spheres)");
@@ -228,15 +232,13 @@ ShapeSpec resolve_shape_spec(const ShapeSpec& spec, const std::optional<Eigen::A
   if (!placed.size) {
     placed.size = use_fit ? 0.5 * fit->sizes().maxCoeff() : 1.0;
     if (!(*placed.size > 0.0))
-      throw InvalidInput("shape '" + shape_spec_string_of(spec) + "': the box to fit has zero size");
+      throw InvalidInput("shape '" + shape_spec_string(spec) + "': the box to fit has zero size");
   }
   return placed;
 }
 
-std::string shape_spec_string(const ShapeSpec& spec) { return shape_spec_string_of(spec); }
-
 Surface make_shape(const ShapeSpec& spec, const std::optional<Eigen::AlignedBox3d>& fit) {
-  const std::string name = shape_spec_string_of(spec);
+  const std::string name = shape_spec_string(spec);
   check_spec(name, spec);
   const ShapeSpec placed = resolve_shape_spec(spec, fit);
   const Eigen::Vector3d center = *placed.center;
