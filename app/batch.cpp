@@ -524,9 +524,10 @@ SummaryRow summary_row(const std::string& job, const std::string& report_json) {
   row.cpu_seconds = optional_at<double>(r, "/cpu_seconds"_json_pointer);
   if (row.total_seconds)
     row.map_seconds = *row.total_seconds - optional_at<double>(r, "/seconds/compare"_json_pointer).value_or(0.0);
-  if (r.contains("/topology/warnings"_json_pointer) && r["topology"]["warnings"].is_array())
-    for (const json& w : r["topology"]["warnings"])
-      if (w.is_string()) row.warnings += (row.warnings.empty() ? "" : "; ") + w.get<std::string>();
+  for (const json::json_pointer& list : {"/inputs/warnings"_json_pointer, "/topology/warnings"_json_pointer})
+    if (r.contains(list) && r[list].is_array())
+      for (const json& w : r[list])
+        if (w.is_string()) row.warnings += (row.warnings.empty() ? "" : "; ") + w.get<std::string>();
   return row;
 }
 

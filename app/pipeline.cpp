@@ -6,6 +6,7 @@
 #include <tbb/global_control.h>
 #include <unistd.h>
 
+#include <algorithm>
 #include <charconv>
 #include <chrono>
 #include <cmath>
@@ -71,10 +72,12 @@ class Progress {
   Clock::time_point start_;
 };
 
+// The shortest text that reads back as t: slice_<t>.obj names stay unique (with six digits 0.3 and 0.3000001 both
+// named slice_0.3.obj, and the second overwrote the first while report.json listed both).
 std::string format_time(double t) {
-  std::ostringstream s;
-  s << std::setprecision(6) << t;
-  return s.str();
+  char buffer[32];
+  const auto result = std::to_chars(buffer, buffer + sizeof buffer, t);
+  return std::string(buffer, result.ptr);
 }
 
 // What load_inputs did to the inputs (index 0 the source, 1 the target), for report.json's `inputs`.
@@ -84,6 +87,7 @@ struct InputNotes {
   std::string shape[2];
   bool reoriented[2] = {false, false};  // its faces wound inward and were turned
   std::int64_t welded[2] = {0, 0};      // vertices merged into another at the same position (an open mesh closed)
+  std::vector<std::string> warnings;    // what the run goes on without (a texture that is not there)
 };
 
 // make_shape(spec, fit), and in `placed` the spec as placed (report.json's inputs.*_shape), from which make_shape
@@ -139,6 +143,19 @@ void load_inputs(const PipelineOptions& options, Surface& A, Surface& B, Surface
     // Read now, so that an unreadable image is reported before any work; the outputs re-encode it as PNG.
     A.texture = std::make_shared<const RgbImage>(read_image(options.texture));
     A.texture_path = options.texture;
+  } else if (!A.texture_path.empty() && !A.texture) {
+    // The MTL's image, decoded once to check it (the outputs copy the file as it is): an unreadable one, such as a
+    // truncated download, was copied and named by target.mtl without a word.
+    try {
+      (void)read_image(A.texture_path);
+    } catch (const IoError& e) {
+      throw InvalidInput(options.source + ": the texture its material names is unusable: " + e.what() +
+                         " (give another with --texture)");
+    }
+  } else if (!A.missing_texture.empty() && A.has_uv()) {
+    notes.warnings.push_back(
+        options.source + ": its material names the texture " + A.missing_texture +
+        ", which does not exist: target.obj gets the UVs but no texture (give one with --texture)");
   }
 }
 
@@ -438,8 +455,12 @@ PipelineResult run_pipeline(const PipelineOptions& options) {
   if (options.source_projection != "inverse" && options.source_projection != "closest")
     throw InvalidInput("--source-projection: unknown value '" + options.source_projection +
                        "' (choose inverse, closest)");
-  for (double t : options.slices)
+  // Each time once, in the order given: a repeated time would write the same file twice and list it twice.
+  std::vector<double> slice_times;
+  for (double t : options.slices) {
     if (!(t > 0.0 && t < 1.0)) throw InvalidInput("--slices: time " + format_time(t) + " is not in (0, 1)");
+    if (std::find(slice_times.begin(), slice_times.end(), t) == slice_times.end()) slice_times.push_back(t);
+  }
   (void)make_solver(options.laplace.solver, options.laplace.solve);  // rejects an unknown backend before any work
   for (const std::string& name : options.compare_solvers) (void)make_solver(name, options.laplace.solve);
 
@@ -771,7 +792,7 @@ PipelineResult run_pipeline(const PipelineOptions& options) {
     SeamResult seams;
   };
   std::vector<SliceOut> slices;
-  for (double t : options.slices) {
+  for (double t : slice_times) {
     SliceOut s{t, slice_at(mesh, transport.labels, t), {}, {}};
     trace_labels(s.mesh);
     if (A.has_uv()) s.uv = uv_at(A, locator.closest_all(s.mesh.labels));
@@ -856,6 +877,8 @@ PipelineResult run_pipeline(const PipelineOptions& options) {
     report["inputs"][side + "_welded_vertices"] = input_notes.welded[which];
   }
   if (user_target) report["inputs"]["target_mesh_reoriented"] = target_mesh_reoriented;
+  report["inputs"]["warnings"] = input_notes.warnings;
+  for (const std::string& w : input_notes.warnings) std::fprintf(stderr, "morphmap: warning: %s\n", w.c_str());
   report["options"] = {{"voxels", options.morph.voxels},
                        {"voxel_size", morph.field.voxel_size},
                        {"padding", options.morph.padding},

@@ -22,7 +22,8 @@ RgbImage read_image(const std::string& path) {
   stbi_uc* data = stbi_load(path.c_str(), &width, &height, &channels, 3);
   if (data == nullptr) {
     const char* reason = stbi_failure_reason();
-    throw IoError(path + ": cannot read image (" + (reason != nullptr ? reason : "unknown error") + ")");
+    throw IoError(path + ": cannot read image (" +
+                  (reason != nullptr && *reason != '\0' ? reason : "corrupt or truncated") + ")");
   }
   RgbImage image;
   image.width = width;

@@ -363,7 +363,10 @@ Surface read_obj(const std::string& path) {
       }
     }
     if (texture.empty()) texture = first_texture;
-    if (!texture.empty()) surface.texture_path = resolve_texture(folder, texture);
+    if (!texture.empty()) {
+      surface.texture_path = resolve_texture(folder, texture);
+      if (surface.texture_path.empty()) surface.missing_texture = texture;
+    }
   }
   return surface;
 }

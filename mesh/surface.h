@@ -38,6 +38,8 @@ struct Surface {
   /// Built-in analytic shapes: the exact signed distance (negative inside) of the shape the triangles approximate
   /// (their vertices lie on it). The distance-field morph samples it instead of the mesh's distance. Empty for meshes.
   SignedDistance signed_distance;
+  /// The image the MTL names when no such file exists (texture_path is then empty): the pipeline warns.
+  std::string missing_texture;
 
   bool has_uv() const { return UV.rows() > 0 && FUV.rows() == F.rows(); }
   bool has_texture() const { return texture != nullptr || !texture_path.empty(); }

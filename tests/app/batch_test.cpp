@@ -229,6 +229,10 @@ TEST_F(Batch, SummaryRowTakesDiffusionAndSolveFromEitherSide) {
   report["topology"] = {{"warnings", {"the target, as extracted, has two parts", "and a handle"}}};
   row = summary_row("t", report.dump());
   EXPECT_EQ(row.warnings, "the target, as extracted, has two parts; and a handle");
+  // The inputs' warnings (a texture that is not there) come first.
+  report["inputs"] = {{"warnings", {"a.obj: no texture"}}};
+  row = summary_row("t", report.dump());
+  EXPECT_EQ(row.warnings, "a.obj: no texture; the target, as extracted, has two parts; and a handle");
   // Errors with commas and quotes survive the CSV.
   SummaryRow failed;
   failed.job = "f";

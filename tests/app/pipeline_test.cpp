@@ -288,6 +288,67 @@ TEST(Pipeline, LabelsFileHoldsEveryLabelAsPrintfsSeventeenDigits) {
   std::filesystem::remove_all(dir);
 }
 
+TEST(Pipeline, SlicesAtNearbyTimesGetTheirOwnFilesAndRepeatsOne) {
+  // Slice names were the time to six digits: 0.3 and 0.3000001 both wrote slice_0.3.obj, the second over the first,
+  // and report.json listed both. A time given twice wrote and listed the same file twice.
+  const std::filesystem::path dir = std::filesystem::path(::testing::TempDir()) / "slice_names";
+  std::filesystem::remove_all(dir);
+  PipelineOptions o = small_options("sphere:res=24", "torus", "cg-amg");
+  o.output_dir = dir.string();
+  o.slices = {0.3, 0.3000001, 0.3};
+  run_pipeline(o);
+  const nlohmann::json report = nlohmann::json::parse(std::ifstream(dir / "report.json"));
+  ASSERT_EQ(report["slices"].size(), 2u);
+  EXPECT_EQ(report["slices"][0]["file"], "slice_0.3.obj");
+  EXPECT_EQ(report["slices"][1]["file"], "slice_0.3000001.obj");
+  for (const auto& slice : report["slices"]) {
+    const Surface s = read_surface((dir / slice["file"].get<std::string>()).string());
+    EXPECT_GT(s.F.rows(), 100) << slice["file"];
+  }
+  std::filesystem::remove_all(dir);
+}
+
+// Writes the built-in sphere (res 24, with its UVs) as `name`.obj naming `name`.mtl, whose map_Kd is `texture`.
+std::string write_textured_sphere(const std::filesystem::path& dir, const std::string& name,
+                                  const std::string& texture) {
+  const Surface sphere = make_shape(parse_shape_spec("sphere:res=24"), std::nullopt);
+  const std::string obj = (dir / (name + ".obj")).string();
+  write_obj(obj, sphere.V, sphere.F, sphere.UV, sphere.FUV, name + ".mtl");
+  std::ofstream(dir / (name + ".mtl")) << "newmtl m\nmap_Kd " << texture << "\n";
+  return obj;
+}
+
+TEST(Pipeline, MissingTextureIsAWarningAndAnUnreadableOneAnError) {
+  // An MTL naming an image that is not there: the map goes on, with the UVs and a warning in report.json (before, the
+  // texture vanished without one). An image that cannot be read (a truncated download) is refused before any work: it
+  // was copied into the outputs and named by target.mtl.
+  const std::filesystem::path dir = std::filesystem::path(::testing::TempDir()) / "mtl_textures";
+  std::filesystem::remove_all(dir);
+  std::filesystem::create_directories(dir);
+  PipelineOptions o = small_options(write_textured_sphere(dir, "missing", "nothere.png"), "torus", "cg-amg");
+  o.morph.voxels = 12;
+  o.output_dir = (dir / "out").string();
+  run_pipeline(o);
+  const nlohmann::json report = nlohmann::json::parse(std::ifstream(dir / "out" / "report.json"));
+  ASSERT_EQ(report["inputs"]["warnings"].size(), 1u);
+  EXPECT_NE(report["inputs"]["warnings"][0].get<std::string>().find("nothere.png"), std::string::npos);
+  EXPECT_FALSE(std::filesystem::exists(dir / "out" / "target.mtl"));
+  EXPECT_TRUE(read_surface((dir / "out" / "target.obj").string()).has_uv());
+
+  std::ofstream(dir / "broken.png") << "\x89PNG\r\n\x1a\n";  // a PNG signature and nothing after it
+  o.source = write_textured_sphere(dir, "broken", "broken.png");
+  o.output_dir = (dir / "out2").string();
+  try {
+    run_pipeline(o);
+    FAIL() << "an unreadable texture was accepted";
+  } catch (const InvalidInput& e) {
+    EXPECT_NE(std::string(e.what()).find("broken.obj"), std::string::npos) << e.what();
+    EXPECT_NE(std::string(e.what()).find("broken.png"), std::string::npos) << e.what();
+  }
+  EXPECT_FALSE(std::filesystem::exists(dir / "out2"));
+  std::filesystem::remove_all(dir);
+}
+
 TEST(Pipeline, PlyHoldsTheObjsTrianglesWithTheirCornerUvs) {
   // target.ply is target.obj's seam-split mesh with per-vertex UVs: every triangle's corners carry the OBJ's
   // per-corner UVs. (It held the unsplit B before, whose triangles across the sphere's longitude-0 seam took UVs from

@@ -112,6 +112,7 @@ TEST_F(MeshIoTest, ObjWithoutMtlOrTextureHasNoTexture) {
   write("cube.mtl", "newmtl skin\nmap_Kd missing.png\n");
   const Surface s = read_surface(obj);
   EXPECT_TRUE(s.texture_path.empty());
+  EXPECT_EQ(s.missing_texture, "missing.png");  // for the pipeline's warning
   EXPECT_TRUE(s.has_uv());
 }
 
