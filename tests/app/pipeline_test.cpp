@@ -180,6 +180,35 @@ TEST(Pipeline, ShapeMorphedToItselfMapsItsOwnVerticesToThemselves) {
   }
 }
 
+TEST(Pipeline, TargetMeshFarFromTheTargetIsWarnedAbout) {
+  // --target-mesh takes its labels through closest points on the extracted B: the target's own mesh lies within about
+  // a voxel of it, a mesh in other coordinates far away, whose closest points correspond to nothing. That was silent.
+  const std::filesystem::path dir = std::filesystem::path(::testing::TempDir()) / "far_target_mesh";
+  std::filesystem::create_directories(dir);
+  const std::string octahedron = write_subdivided_octahedron(dir / "octahedron.off");
+  Surface moved = read_surface(octahedron);
+  moved.V.col(0).array() += 3.0 * bounding_box(moved.V).diagonal().norm();
+  const std::string far = (dir / "far.obj").string();
+  write_obj(far, moved.V, moved.F, Eigen::MatrixXd(), Eigen::MatrixXi(), "");
+  for (const std::string& mesh : {octahedron, far}) {
+    PipelineOptions o = small_options("sphere", octahedron, "cg-amg");
+    o.target_mesh = mesh;
+    o.morph.voxels = 12;
+    o.extract.time_steps = 4;
+    const nlohmann::json inputs = nlohmann::json::parse(run_pipeline(o).report_json)["inputs"];
+    const double largest = inputs["target_mesh_distance_voxels"]["max"].get<double>();
+    if (mesh == octahedron) {
+      EXPECT_LT(largest, 1.5);
+      EXPECT_TRUE(inputs["warnings"].empty()) << inputs["warnings"];
+    } else {
+      EXPECT_GT(largest, 20.0);
+      ASSERT_EQ(inputs["warnings"].size(), 1u);
+      EXPECT_NE(inputs["warnings"][0].get<std::string>().find("far.obj"), std::string::npos);
+    }
+  }
+  std::filesystem::remove_all(dir);
+}
+
 // Angles between each target vertex and its preimage on concentric spheres (the exact map is radial): mean and max.
 std::pair<double, double> radial_errors(const std::string& method, int voxels) {
   PipelineOptions o =
