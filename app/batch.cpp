@@ -427,6 +427,8 @@ std::vector<BatchJob> parse_manifest(const std::string& text, const std::string&
       where += " (" + job.name + ")";
       if (!is_plain_name(job.name))
         throw InvalidInput(where + ": name must be letters, digits, '-', '_' or '.' (it names the job's folder)");
+      if (job.name == "summary.csv" || job.name == "summary.md")
+        throw InvalidInput(where + ": name '" + job.name + "' is the batch's own summary file, not a job folder");
     }
     for (const BatchJob& other : result)
       if (other.name == job.name) throw InvalidInput(where + ": name '" + job.name + "' used twice");

@@ -144,6 +144,9 @@ TEST_F(Batch, ManifestErrorsNameManifestAndJob) {
   expect_manifest_error(std::string("{\"jobs\": [{") + kTiny + ", \"max-memory\": \"5Q\"}]}", {"job 1", "5Q"});
   expect_manifest_error(std::string("{\"jobs\": [{") + kTiny + ", \"ply\": \"yes\"}]}", {"ply", "flag"});
   expect_manifest_error(std::string("{\"jobs\": [{") + kTiny + ", \"name\": \"../up\"}]}", {"name"});
+  // A job folder named like the batch's summaries made the summary's rename fail after the job had run.
+  for (const char* own : {"summary.csv", "summary.md"})
+    expect_manifest_error(std::string("{\"jobs\": [{") + kTiny + ", \"name\": \"" + own + "\"}]}", {own, "summary"});
   expect_manifest_error(std::string("{\"jobs\": [{") + kTiny + ", \"name\": \"a\"}, {" + kTiny + ", \"name\": \"a\"}]}",
                         {"job 2", "twice"});
 }
