@@ -1003,6 +1003,7 @@ PipelineResult run_pipeline(const PipelineOptions& options) {
         {"stretched_after", untangle.stretched_after},
         {"patches_tried", untangle.patches_tried},
         {"patches_rebuilt", untangle.patches_rebuilt},
+        {"layouts_untangled", untangle.layouts_untangled},
         {"patch_vertices", untangle.patch_vertices},
         {"region_vertices", untangle.region_vertices},
         {"vertices_moved", untangle.vertices_moved},

@@ -18,6 +18,7 @@
 #include <string>
 #include <vector>
 
+#include "mesh/chart_untangle.h"
 #include "mesh/errors.h"
 #include "mesh/metrics.h"
 
@@ -646,7 +647,7 @@ class Untangler {
         std::sort(faces.begin(), faces.end());
         faces.erase(std::unique(faces.begin(), faces.end()), faces.end());
         std::vector<int> moved;
-        if (lay_out_patch(faces, moved)) {
+        if (lay_out_patch(faces, moved, result)) {
           ++result.patches_rebuilt;
           result.patch_vertices += std::int64_t(moved.size());
           rebuilt.insert(rebuilt.end(), moved.begin(), moved.end());
@@ -659,10 +660,44 @@ class Untangler {
     return rebuilt;
   }
 
+  /// Where the Tutte layout `x` of a patch (indexed by slot[] of its vertices) turns triangles over in the chart,
+  /// which it can where the boundary is not convex, they are untangled with the boundary fixed (chart_untangle.h),
+  /// each triangle's reference its shape on B scaled to A's area.
+  bool untangle_layout(const std::vector<int>& faces, const std::vector<int>& slot, const std::vector<char>& fixed,
+                       std::vector<Eigen::Vector2d>& x) const {
+    Eigen::MatrixX3i local(Eigen::Index(faces.size()), 3);
+    std::vector<Eigen::Matrix2d> inverse(faces.size());
+    std::vector<double> weight(faces.size());
+    bool folds = false;
+    for (std::size_t a = 0; a < faces.size(); ++a) {
+      const int f = faces[a];
+      for (int k = 0; k < 3; ++k) local(Eigen::Index(a), k) = slot[std::size_t(F_(f, k))];
+      const Eigen::Vector2d& p0 = x[std::size_t(local(Eigen::Index(a), 0))];
+      folds = folds || !(area(x[std::size_t(local(Eigen::Index(a), 1))] - p0,
+                              x[std::size_t(local(Eigen::Index(a), 2))] - p0) > 0.0);
+      // B's triangle in its own plane: edge 0-1 along the first axis, corner 2 above it.
+      const Eigen::Vector3d b0 = V_.row(F_(f, 0)), e = V_.row(F_(f, 1)).transpose() - b0,
+                            g = V_.row(F_(f, 2)).transpose() - b0;
+      const Eigen::Vector3d u = e.normalized(), v = (e.cross(g)).cross(e).normalized();
+      Eigen::Matrix2d R;
+      R << e.norm(), g.dot(u), 0.0, g.dot(v);
+      R *= scale_;
+      if (!(R.determinant() > 0.0) || !R.allFinite()) return false;  // a degenerate triangle of B: no reference
+      inverse[a] = R.inverse();
+      weight[a] = 0.5 * R.determinant();
+    }
+    if (!folds) return false;
+    Eigen::MatrixX2d positions(Eigen::Index(x.size()), 2);
+    for (std::size_t i = 0; i < x.size(); ++i) positions.row(Eigen::Index(i)) = x[i].transpose();
+    untangle_chart(positions, fixed, local, inverse, weight);
+    for (std::size_t i = 0; i < x.size(); ++i) x[i] = positions.row(Eigen::Index(i)).transpose();
+    return true;
+  }
+
   /// The Tutte layout of one patch (triangles `faces`, sorted) in a chart of A; false, with the labels as they
   /// were, unless the patch is a disk whose boundary is a simple loop in the chart and every triangle comes out
   /// positive there and on A. `moved` gets the inner vertices.
-  bool lay_out_patch(const std::vector<int>& faces, std::vector<int>& moved) {
+  bool lay_out_patch(const std::vector<int>& faces, std::vector<int>& moved, UntangleResult& result) {
     // Boundary: half-edges whose twin is not in the patch; a disk has V - E + F = 1 and one boundary loop.
     std::map<std::pair<int, int>, int> half;
     for (const int f : faces)
@@ -764,6 +799,7 @@ class Untangler {
     if (lu.info() != Eigen::Success || !solution.allFinite()) return false;
     for (int i = 0; i < n; ++i)
       if (!fixed[std::size_t(i)]) x[std::size_t(i)] = solution.row(unknown[std::size_t(i)]).transpose();
+    if (options_.untangle_layouts && untangle_layout(faces, slot, fixed, x)) ++result.layouts_untangled;
     std::int64_t bad_before = 0;
     for (const int f : faces) bad_before += state_[std::size_t(f)] != kGood;
 

@@ -73,6 +73,9 @@ struct UntangleOptions {
   /// to `max_patch_rings`. Measured on sphere -> bunny at 40 voxels (with --thin-features): max stretch 1.2e9 ->
   /// 33, variance 4e12 -> 0.086, folded 88 -> 60 (63 with the smoothing's sliver guard; README, "Fold repair").
   bool rebuild_patches = true;
+  /// A patch layout that turns triangles over in its chart (a boundary that is not convex) is untangled there before
+  /// it is judged (mesh/chart_untangle.h: Garanzha et al.'s foldover-free energy, the boundary fixed).
+  bool untangle_layouts = true;
   int patch_rings = 2;
   int max_patch_rings = 8;
   std::int64_t max_patch_vertices = 2000;  ///< patches stop growing at this many vertices
@@ -91,10 +94,11 @@ struct UntangleResult {
   std::int64_t smoothing_moves = 0;                        ///< vertex moves of the smoothing, over all sweeps
   int smoothing_sweeps = 0;                                ///< sweeps of the smoothing, over all its rounds
   std::int64_t patches_tried = 0;                          ///< clusters of bad triangles a rebuild was tried on
-  std::int64_t patches_rebuilt = 0;  ///< of those, clusters laid out again (in a patch free of bad triangles)
-  std::int64_t patch_vertices = 0;   ///< inner vertices of the rebuilt patches
-  int rounds = 0;                    ///< rounds run
-  int sweeps = 0;                    ///< sweeps run, over all rounds
+  std::int64_t patches_rebuilt = 0;    ///< of those, clusters laid out again (in a patch free of bad triangles)
+  std::int64_t patch_vertices = 0;     ///< inner vertices of the rebuilt patches
+  std::int64_t layouts_untangled = 0;  ///< patch layouts that folded in their chart and were untangled (kept or not)
+  int rounds = 0;                      ///< rounds run
+  int sweeps = 0;                      ///< sweeps run, over all rounds
   double seconds = 0.0;
 };
 

@@ -148,6 +148,42 @@ TEST(Untangle, PatchRebuildRightsAMirroredDisk) {
   EXPECT_GT(untangle_labels(A, locator, A.V, A.F, only_local, local).folded_after, 0);
 }
 
+// The identity map warped, within about nine rings of c, into a three-lobed star (each point's distance from c scaled
+// by 1 + 0.7 cos(3 phi) on the way out, the identity again at the rim), with the inner five rings mirrored as in
+// mirrored_disk: the patch around the fold then has a boundary far from convex in its chart.
+Eigen::MatrixXd mirrored_star(const Surface& A) {
+  const Eigen::Vector3d c = Eigen::Vector3d(1.0, 0.2, 0.1).normalized();
+  const Eigen::Vector3d u = c.cross(Eigen::Vector3d::UnitZ()).normalized(), w = c.cross(u);
+  const double h = mean_edge(A), rim = 9.0 * h;
+  return moved_disk(A, c, 9.0, [&](const Eigen::Vector3d& p) {
+    Eigen::Vector3d q = p;
+    if ((p - c).norm() < 5.0 * h) q = p - 2.0 * (p - c).dot(u) * u;
+    const Eigen::Vector2d d((q - c).dot(u), (q - c).dot(w));
+    const double r = d.norm(), phi = std::atan2(d.y(), d.x());
+    const double scale = 1.0 + 0.7 * std::cos(3.0 * phi) * std::sin(M_PI * std::min(r / rim, 1.0));
+    return Eigen::Vector3d(c + scale * (d.x() * u + d.y() * w));
+  });
+}
+
+TEST(Untangle, PatchLayoutThatFoldsInItsChartIsUntangled) {
+  // The Tutte layout of a patch whose boundary is not convex turns triangles over next to it; they are untangled in
+  // the chart (chart_untangle.h) before the layout is judged. Without that the fold stays.
+  const Surface A = fine_sphere();
+  const SurfaceLocator locator(A);
+  const Eigen::MatrixXd damaged = mirrored_star(A);
+  ASSERT_GE(measure_stretch(A, A.V, A.F, damaged).folded, 12);
+  Eigen::MatrixXd labels = damaged;
+  const UntangleResult r = untangle_labels(A, locator, A.V, A.F, labels, enabled());
+  EXPECT_GE(r.layouts_untangled, 1);
+  EXPECT_EQ(measure_stretch(A, A.V, A.F, labels).folded, 0);
+  UntangleOptions plain = enabled();
+  plain.untangle_layouts = false;
+  Eigen::MatrixXd tutte_only = damaged;
+  const UntangleResult without = untangle_labels(A, locator, A.V, A.F, tutte_only, plain);
+  EXPECT_EQ(without.layouts_untangled, 0);
+  EXPECT_GT(measure_stretch(A, A.V, A.F, tutte_only).folded, 0) << r.patches_rebuilt << " " << without.patches_rebuilt;
+}
+
 // The identity map with a disk of labels (about three rings) squeezed towards its centre to a twentieth of its
 // radius: nothing folds or collapses, but its triangles' preimages are 400 times too small (L2 stretch about 20),
 // as where the characteristics of an ear's tip all stall in one point.
