@@ -157,6 +157,15 @@ void load_inputs(const PipelineOptions& options, Surface& A, Surface& B, Surface
         options.source + ": its material names the texture " + A.missing_texture +
         ", which does not exist: target.obj gets the UVs but no texture (give one with --texture)");
   }
+  if (options.texture.empty() && !A.other_textures.empty() && A.has_uv()) {
+    // Each face's UVs refer to its own material's image; one image is carried, so the other materials' faces are
+    // textured from the wrong one.
+    std::string names;
+    for (const std::string& name : A.other_textures) names += (names.empty() ? "" : ", ") + name;
+    notes.warnings.push_back(options.source +
+                             ": its materials name more than one texture; target.obj carries the first " +
+                             "for every face, not " + names + " (merge them into one atlas first)");
+  }
 }
 
 void write_labels(const std::string& path, const Eigen::MatrixXd& labels) {

@@ -357,9 +357,12 @@ Surface read_obj(const std::string& path) {
     std::string texture;
     for (const std::string& material : used_materials) {
       const auto it = textures.find(material);
-      if (it != textures.end()) {
+      if (it == textures.end()) continue;
+      if (texture.empty()) {
         texture = it->second;
-        break;
+      } else if (it->second != texture && std::find(surface.other_textures.begin(), surface.other_textures.end(),
+                                                    it->second) == surface.other_textures.end()) {
+        surface.other_textures.push_back(it->second);  // one texture is carried: the caller warns about the rest
       }
     }
     if (texture.empty()) texture = first_texture;

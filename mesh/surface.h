@@ -40,6 +40,8 @@ struct Surface {
   SignedDistance signed_distance;
   /// The image the MTL names when no such file exists (texture_path is then empty): the pipeline warns.
   std::string missing_texture;
+  /// Further images that the OBJ's faces' materials name (in the order of first use): only texture_path's is carried.
+  std::vector<std::string> other_textures;
 
   bool has_uv() const { return UV.rows() > 0 && FUV.rows() == F.rows(); }
   bool has_texture() const { return texture != nullptr || !texture_path.empty(); }

@@ -15,6 +15,7 @@
 #include <utility>
 #include <vector>
 
+#include "io/image.h"
 #include "io/mesh_io.h"
 #include "mesh/errors.h"
 #include "mesh/shapes.h"
@@ -363,6 +364,28 @@ TEST(Pipeline, MissingTextureIsAWarningAndAnUnreadableOneAnError) {
   EXPECT_NE(report["inputs"]["warnings"][0].get<std::string>().find("nothere.png"), std::string::npos);
   EXPECT_FALSE(std::filesystem::exists(dir / "out" / "target.mtl"));
   EXPECT_TRUE(read_surface((dir / "out" / "target.obj").string()).has_uv());
+
+  // Two materials with their own images: one is carried for every face, and the run says which it is not.
+  write_textured_sphere(dir, "two", "first.png");
+  write_png((dir / "first.png").string(), checkerboard(8, 2));
+  write_png((dir / "second.png").string(), checkerboard(8, 4));
+  {
+    std::ifstream in(dir / "two.obj");
+    std::string text((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
+    const std::size_t faces = text.find("usemtl morphmap");
+    ASSERT_NE(faces, std::string::npos);
+    const std::size_t half = text.find("\nf ", (faces + text.size()) / 2);
+    ASSERT_NE(half, std::string::npos);
+    text.insert(half + 1, "usemtl n\n");
+    std::ofstream(dir / "two.obj") << text;
+    std::ofstream(dir / "two.mtl") << "newmtl morphmap\nmap_Kd first.png\nnewmtl n\nmap_Kd second.png\n";
+  }
+  o.source = (dir / "two.obj").string();
+  o.output_dir = (dir / "out3").string();
+  run_pipeline(o);
+  const nlohmann::json two = nlohmann::json::parse(std::ifstream(dir / "out3" / "report.json"));
+  ASSERT_EQ(two["inputs"]["warnings"].size(), 1u) << two["inputs"]["warnings"];
+  EXPECT_NE(two["inputs"]["warnings"][0].get<std::string>().find("second.png"), std::string::npos);
 
   std::ofstream(dir / "broken.png") << "\x89PNG\r\n\x1a\n";  // a PNG signature and nothing after it
   o.source = write_textured_sphere(dir, "broken", "broken.png");

@@ -106,6 +106,21 @@ TEST_F(MeshIoTest, ObjQuadsUvsAndTexture) {
   EXPECT_NEAR(signed_volume(s.V, s.F), 1.0, 1e-15);
 }
 
+TEST_F(MeshIoTest, ObjWithTwoTexturedMaterialsNamesTheOtherImages) {
+  // One texture is carried (the first used); the others are listed so that the pipeline can say so.
+  std::string text = kCubeObj;
+  text.replace(text.find("f 3/1 4/2"), 0, "usemtl coat\n");
+  const std::string obj = write("cube.obj", text);
+  write("cube.mtl", "newmtl skin\nmap_Kd skin.png\nnewmtl coat\nmap_Kd coat.png\n");
+  write("skin.png", "not checked here");
+  write("coat.png", "not checked here");
+  const Surface s = read_surface(obj);
+  EXPECT_EQ(fs::path(s.texture_path).filename(), "skin.png");
+  ASSERT_EQ(s.other_textures.size(), 1u);
+  EXPECT_EQ(s.other_textures[0], "coat.png");
+  EXPECT_TRUE(read_surface(write("one.obj", kCubeObj)).other_textures.empty());
+}
+
 TEST_F(MeshIoTest, ObjWithoutMtlOrTextureHasNoTexture) {
   const std::string obj = write("cube.obj", kCubeObj);
   EXPECT_TRUE(read_surface(obj).texture_path.empty());  // cube.mtl missing
