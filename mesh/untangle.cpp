@@ -662,7 +662,7 @@ class Untangler {
 
   /// Where the Tutte layout `x` of a patch (indexed by slot[] of its vertices) turns triangles over in the chart,
   /// which it can where the boundary is not convex, they are untangled with the boundary fixed (chart_untangle.h),
-  /// each triangle's reference its shape on B scaled to A's area.
+  /// each triangle's reference its shape on B scaled to A's area. True when it ran.
   bool untangle_layout(const std::vector<int>& faces, const std::vector<int>& slot, const std::vector<char>& fixed,
                        std::vector<Eigen::Vector2d>& x) const {
     Eigen::MatrixX3i local(Eigen::Index(faces.size()), 3);

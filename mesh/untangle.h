@@ -2,7 +2,8 @@
 // the morph sends a patch of B onto A mirrored (the two faces of a thin ear onto one patch of the sphere) or onto a
 // point (characteristics squeezed through one join), the vertices of those triangles and a few rings around them
 // move on A: first each cluster of them that is a disk is laid out again in one chart (a Tutte embedding with B's
-// mean value weights inside its fixed boundary, Floater 2003), then each vertex with an inverted or flat triangle to
+// mean value weights inside its fixed boundary, Floater 2003; untangled in that chart where the boundary is not convex
+// and the layout folds, mesh/chart_untangle.h), then each vertex with an inverted or flat triangle to
 // where its smallest triangle (in the tangent plane of A at its label) is largest (local optimisation untangling,
 // Freitag and Plassmann 2000), the region growing while that rights triangles; then the region, the triangles
 // stretched beyond UntangleOptions::stretch_seed (though not folded) and a few more rings around both descend the
