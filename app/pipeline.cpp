@@ -11,11 +11,13 @@
 #include <chrono>
 #include <cmath>
 #include <cstdio>
+#include <cstring>
 #include <filesystem>
 #include <fstream>
 #include <functional>
 #include <iomanip>
 #include <iostream>
+#include <limits>
 #include <nlohmann/json.hpp>
 #include <optional>
 #include <sstream>
@@ -290,7 +292,13 @@ long long parse_memory_size(const std::string& text) {
   } catch (const std::exception&) {
     throw InvalidInput("--max-memory: cannot read '" + text + "' (examples: 8G, 512M, 2000000000)");
   }
-  const std::string unit = text.substr(used);
+  std::string unit = text.substr(used);
+  // 8GB and 8GiB mean 8G (binary units either way, as free(1) and top print them).
+  for (const char* suffix : {"iB", "ib", "B", "b"})
+    if (unit.size() == 1 + std::strlen(suffix) && unit.compare(1, std::string::npos, suffix) == 0) {
+      unit.resize(1);
+      break;
+    }
   double scale = 1.0;
   if (unit == "K" || unit == "k")
     scale = 1024.0;
@@ -304,7 +312,9 @@ long long parse_memory_size(const std::string& text) {
     throw InvalidInput("--max-memory: unknown unit in '" + text + "' (use K, M, G or T)");
   if (!(value > 0.0) || !std::isfinite(value))
     throw InvalidInput("--max-memory: '" + text + "' is not a positive size");
-  return (long long)(value * scale);
+  // Beyond 2^63 bytes the cast is undefined (99999999999999999999G passed or failed by chance): no limit then.
+  const double bytes = value * scale;
+  return bytes >= 9.2e18 ? std::numeric_limits<long long>::max() : (long long)bytes;
 }
 
 std::string stretch_json(const StretchResult& r) {

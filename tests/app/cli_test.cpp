@@ -10,12 +10,14 @@
 #include <cstdio>
 #include <filesystem>
 #include <fstream>
+#include <limits>
 #include <map>
 #include <nlohmann/json.hpp>
 #include <sstream>
 #include <string>
 #include <vector>
 
+#include "app/pipeline.h"
 #include "io/image.h"
 #include "tests/command_line.h"
 
@@ -230,6 +232,12 @@ TEST_F(Cli, MemoryGuardRefusesBeforeAllocating) {
   expect_rejected("sphere torus --max-memory 100M", "--max-memory");
   expect_rejected("sphere torus --max-memory lots", "lots");
   expect_rejected("sphere torus --max-memory 5Q", "5Q");
+  expect_rejected("sphere torus --max-memory 8GQ", "8GQ");
+  // 8GB and 8GiB are 8G; a size beyond 64 bits is no limit (its cast to an integer was undefined).
+  EXPECT_EQ(morphmap::parse_memory_size("8GB"), morphmap::parse_memory_size("8G"));
+  EXPECT_EQ(morphmap::parse_memory_size("512MiB"), 512LL << 20);
+  EXPECT_EQ(morphmap::parse_memory_size("99999999999999999999G"), std::numeric_limits<long long>::max());
+  EXPECT_EQ(morphmap::parse_memory_size("2000000000"), 2000000000LL);
   // The variational morph's dense constraint system is refused before it is built.
   expect_rejected("sphere torus --morph vim --vim-samples 5000 --max-memory 1G", "--vim-samples");
   expect_rejected("sphere torus --morph spline", "--morph");
