@@ -307,7 +307,9 @@ TEST(Untangle, DisabledOnlyCounts) {
 TEST(Untangle, ResultDoesNotDependOnTheThreadCount) {
   const Surface coarse = unit_sphere();
   const Surface fine = fine_sphere();
-  for (const auto& [A, damaged] : {std::pair{&coarse, damaged_labels(coarse)}, std::pair{&fine, squeezed_disk(fine)}}) {
+  // The mirrored star's patch layout folds in its chart and is untangled (PatchLayoutThatFoldsInItsChartIsUntangled).
+  for (const auto& [A, damaged] : {std::pair{&coarse, damaged_labels(coarse)}, std::pair{&fine, squeezed_disk(fine)},
+                                   std::pair{&fine, mirrored_star(fine)}}) {
     const SurfaceLocator locator(*A);
     Eigen::MatrixXd one = damaged, two = damaged;
     {
