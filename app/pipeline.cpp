@@ -318,23 +318,13 @@ long long parse_memory_size(const std::string& text) {
 }
 
 std::string stretch_json(const StretchResult& r) {
-  const nlohmann::json j = {{"triangles", r.triangles},
-                            {"measured", r.measured},
-                            {"min_compression", r.min_sigma2},
-                            {"max_stretch", r.max_sigma1},
-                            {"mean_l2", r.mean_l2},
-                            {"variance_l2", r.variance_l2},
-                            {"sander_l2", r.sander_l2},
-                            {"folded", r.folded},
-                            {"collapsed", r.collapsed},
-                            {"coverage", r.coverage},
-                            {"area_source", r.area_a},
-                            {"area_target", r.area_b},
-                            {"l2_median", r.l2_median},
-                            {"l2_p90", r.l2_p90},
-                            {"l2_p99", r.l2_p99},
-                            {"area_over_2", r.area_over_2},
-                            {"area_over_10", r.area_over_10}};
+  const nlohmann::json j = {
+      {"triangles", r.triangles},    {"measured", r.measured},       {"min_compression", r.min_sigma2},
+      {"max_stretch", r.max_sigma1}, {"mean_l2", r.mean_l2},         {"variance_l2", r.variance_l2},
+      {"sander_l2", r.sander_l2},    {"folded", r.folded},           {"collapsed", r.collapsed},
+      {"degenerate", r.degenerate},  {"coverage", r.coverage},       {"area_source", r.area_a},
+      {"area_target", r.area_b},     {"l2_median", r.l2_median},     {"l2_p90", r.l2_p90},
+      {"l2_p99", r.l2_p99},          {"area_over_2", r.area_over_2}, {"area_over_10", r.area_over_10}};
   return j.dump(2);
 }
 

@@ -81,6 +81,10 @@ bool collapsed(const TriangleMaps& maps, Eigen::Index f, double mean_preimage_ar
   return !(maps.area_p(f) > options.collapse_ratio * mean_preimage_area) || !std::isfinite(maps.sigma1(f));
 }
 
+bool degenerate(const TriangleMaps& maps, Eigen::Index f, double mean_area_b, const StretchOptions& options) {
+  return !(maps.area_b(f) > options.collapse_ratio * mean_area_b);
+}
+
 }  // namespace
 
 StretchResult measure_stretch(const Surface& A, const Eigen::MatrixXd& V, const TriIndices& F,
@@ -105,12 +109,17 @@ StretchResult measure_stretch(const Surface& A, const Eigen::MatrixXd& V, const 
   const SurfaceLocator locator(A);
   const std::vector<SurfaceHit> hits = locator.closest_all(centroid);
   const double mean_preimage_area = area_p.sum() / std::max<Eigen::Index>(1, n);
+  const double mean_area_b = area_b.sum() / std::max<Eigen::Index>(1, n);
   double weight = 0.0, sum = 0.0, sum2 = 0.0;
   std::vector<std::pair<double, double>> l2_area;  // (L2, B area) of measured triangles, for the quantiles
   r.min_sigma2 = std::numeric_limits<double>::infinity();
   r.max_sigma1 = 0.0;
   for (Eigen::Index f = 0; f < n; ++f) {
     r.coverage += area_p(f);
+    if (degenerate(maps, f, mean_area_b, options)) {
+      ++r.degenerate;
+      continue;
+    }
     if (collapsed(maps, f, mean_preimage_area, options)) {
       ++r.collapsed;
       continue;
@@ -160,9 +169,10 @@ Eigen::VectorXd stretch_per_triangle(const Surface& A, const Eigen::MatrixXd& V,
   const TriangleMaps maps = triangle_maps(V, F, preimages, std::sqrt(area_b / area_a));
   const Eigen::Index n = F.rows();
   const double mean_preimage_area = maps.area_p.sum() / std::max<Eigen::Index>(1, n);
+  const double mean_area_b = maps.area_b.sum() / std::max<Eigen::Index>(1, n);
   Eigen::VectorXd l2(n);
   for (Eigen::Index f = 0; f < n; ++f) {
-    l2(f) = collapsed(maps, f, mean_preimage_area, options)
+    l2(f) = collapsed(maps, f, mean_preimage_area, options) || degenerate(maps, f, mean_area_b, options)
                 ? std::numeric_limits<double>::quiet_NaN()
                 : std::sqrt(0.5 * (maps.sigma1(f) * maps.sigma1(f) + maps.sigma2(f) * maps.sigma2(f)));
   }

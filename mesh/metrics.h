@@ -18,15 +18,20 @@ struct StretchOptions {
 
 struct StretchResult {
   std::int64_t triangles = 0;  ///< triangles of B
-  std::int64_t measured = 0;   ///< triangles entering the statistics (not collapsed)
+  std::int64_t measured = 0;   ///< triangles entering the statistics (neither collapsed nor degenerate)
   double min_sigma2 = 0.0;     ///< smallest singular value ("compression"), normalised
   double max_sigma1 = 0.0;     ///< largest singular value ("stretch"), normalised
   double mean_l2 = 0.0;        ///< area-weighted (B areas) mean of L2 = sqrt((s1^2 + s2^2) / 2)
   double variance_l2 = 0.0;    ///< area-weighted variance of L2
   double sander_l2 = 0.0;      ///< Sander's L2 norm: sqrt(sum a L2^2 / sum a)
   std::int64_t folded = 0;     ///< preimage triangles facing against A's outward normal
-  std::int64_t collapsed = 0;  ///< preimage triangles of (near) zero area
-  double coverage = 0.0;       ///< sum of preimage areas / area(A)
+  std::int64_t collapsed = 0;  ///< preimage triangles of (near) zero area (of triangles with area on B)
+  /// Triangles of (near) zero area on B itself (below collapse_ratio times B's mean): pieces of a seam split whose cut
+  /// passed through a vertex. They have no stretch to measure and are left out of every figure but the coverage;
+  /// counted as collapsed before 2026-12-06, they gave an identity morph of the textured sphere 173 collapsed
+  /// triangles and a min of 0.
+  std::int64_t degenerate = 0;
+  double coverage = 0.0;  ///< sum of preimage areas / area(A)
   /// Area-weighted quantiles of L2 over the measured triangles (B areas): the median, 90th and 99th percentile.
   /// A mean is dominated by a few badly compressed triangles; these say how much of B is how distorted.
   double l2_median = 0.0, l2_p90 = 0.0, l2_p99 = 0.0;
@@ -43,7 +48,7 @@ StretchResult measure_stretch(const Surface& A, const Eigen::MatrixXd& V, const 
                               const Eigen::MatrixXd& preimages, const StretchOptions& options = {});
 
 /// Per-triangle L2 stretch sqrt((s1^2 + s2^2) / 2) of the same map, normalised like measure_stretch (#F values);
-/// NaN for the triangles measure_stretch counts as collapsed. For stretch heat maps.
+/// NaN for the triangles measure_stretch counts as collapsed or degenerate. For stretch heat maps.
 Eigen::VectorXd stretch_per_triangle(const Surface& A, const Eigen::MatrixXd& V, const TriIndices& F,
                                      const Eigen::MatrixXd& preimages, const StretchOptions& options = {});
 

@@ -100,7 +100,30 @@ TEST(Stretch, FoldedAndCollapsedPreimagesAreCounted) {
   const StretchResult r = measure_stretch(A, A.V, G, pre);
   EXPECT_GE(r.collapsed, 1);
   EXPECT_GE(r.folded, 1);
-  EXPECT_EQ(r.measured + r.collapsed, r.triangles);
+  EXPECT_EQ(r.measured + r.collapsed + r.degenerate, r.triangles);
+}
+
+TEST(Stretch, TrianglesWithoutAreaOnBAreLeftOutNotCollapsed) {
+  // A seam split whose cut passes through a vertex leaves a piece of zero area on B; its preimage has none either,
+  // and it has no stretch. It was counted as collapsed, and its neighbour-less sigma2 set the min to 0.
+  const Surface A = unit_sphere();
+  Eigen::MatrixXd B = A.V, pre = A.V;
+  TriIndices F = faces_of(A);
+  const Eigen::Index last = F.rows();
+  F.conservativeResize(last + 1, 3);
+  B.conservativeResize(B.rows() + 1, 3);
+  pre.conservativeResize(pre.rows() + 1, 3);
+  // A new vertex on the middle of triangle 0's first edge, and the flat triangle (edge ends and that point).
+  const int mid = int(B.rows()) - 1;
+  B.row(mid) = 0.5 * (A.V.row(F(0, 0)) + A.V.row(F(0, 1)));
+  pre.row(mid) = B.row(mid);
+  F.row(last) << F(0, 0), mid, F(0, 1);
+  const StretchResult r = measure_stretch(A, B, F, pre);
+  EXPECT_EQ(r.degenerate, 1);
+  EXPECT_EQ(r.collapsed, 0);
+  EXPECT_EQ(r.measured, A.F.rows());
+  EXPECT_NEAR(r.min_sigma2, 1.0, 1e-9);
+  EXPECT_TRUE(std::isnan(stretch_per_triangle(A, B, F, pre)(last)));
 }
 
 TEST(Stretch, RejectsMismatchedInput) {
