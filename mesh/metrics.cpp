@@ -82,7 +82,7 @@ bool collapsed(const TriangleMaps& maps, Eigen::Index f, double mean_preimage_ar
 }
 
 bool degenerate(const TriangleMaps& maps, Eigen::Index f, double mean_area_b, const StretchOptions& options) {
-  return !(maps.area_b(f) > options.collapse_ratio * mean_area_b);
+  return !(maps.area_b(f) > options.degenerate_ratio * mean_area_b);
 }
 
 }  // namespace
