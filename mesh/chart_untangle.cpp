@@ -24,11 +24,7 @@ class Energy {
     if (gradient != nullptr) gradient->setZero();
     double total = 0.0;
     for (Eigen::Index f = 0; f < F_.rows(); ++f) {
-      const Eigen::Vector2d p0 = x.row(F_(f, 0)).transpose();
-      Eigen::Matrix2d E;
-      E.col(0) = x.row(F_(f, 1)).transpose() - p0;
-      E.col(1) = x.row(F_(f, 2)).transpose() - p0;
-      const Eigen::Matrix2d J = E * inverse_[std::size_t(f)];
+      const Eigen::Matrix2d J = jacobian(x, f);
       const double d = J.determinant();
       const double c = chi(d, eps);
       const double g = (1.0 - theta_) * J.squaredNorm() + theta_ * (d * d + 1.0);
@@ -55,16 +51,21 @@ class Energy {
   double smallest_det(const Eigen::MatrixX2d& x) const {
     double smallest = std::numeric_limits<double>::infinity();
     for (Eigen::Index f = 0; f < F_.rows(); ++f) {
-      const Eigen::Vector2d p0 = x.row(F_(f, 0)).transpose();
-      Eigen::Matrix2d E;
-      E.col(0) = x.row(F_(f, 1)).transpose() - p0;
-      E.col(1) = x.row(F_(f, 2)).transpose() - p0;
-      smallest = std::min(smallest, (E * inverse_[std::size_t(f)]).determinant());
+      smallest = std::min(smallest, jacobian(x, f).determinant());
     }
     return smallest;
   }
 
  private:
+  /// Triangle f's map from its reference shape to its position in x.
+  Eigen::Matrix2d jacobian(const Eigen::MatrixX2d& x, Eigen::Index f) const {
+    const Eigen::Vector2d p0 = x.row(F_(f, 0)).transpose();
+    Eigen::Matrix2d E;
+    E.col(0) = x.row(F_(f, 1)).transpose() - p0;
+    E.col(1) = x.row(F_(f, 2)).transpose() - p0;
+    return E * inverse_[std::size_t(f)];
+  }
+
   const Eigen::MatrixX3i& F_;
   const std::vector<int>& unknown_;
   const std::vector<Eigen::Matrix2d>& inverse_;

@@ -666,15 +666,18 @@ class Untangler {
   bool untangle_layout(const std::vector<int>& faces, const std::vector<int>& slot, const std::vector<char>& fixed,
                        std::vector<Eigen::Vector2d>& x) const {
     Eigen::MatrixX3i local(Eigen::Index(faces.size()), 3);
-    std::vector<Eigen::Matrix2d> inverse(faces.size());
-    std::vector<double> weight(faces.size());
     bool folds = false;
     for (std::size_t a = 0; a < faces.size(); ++a) {
-      const int f = faces[a];
-      for (int k = 0; k < 3; ++k) local(Eigen::Index(a), k) = slot[std::size_t(F_(f, k))];
+      for (int k = 0; k < 3; ++k) local(Eigen::Index(a), k) = slot[std::size_t(F_(faces[a], k))];
       const Eigen::Vector2d& p0 = x[std::size_t(local(Eigen::Index(a), 0))];
       folds = folds || !(area(x[std::size_t(local(Eigen::Index(a), 1))] - p0,
                               x[std::size_t(local(Eigen::Index(a), 2))] - p0) > 0.0);
+    }
+    if (!folds) return false;  // most layouts: no references to build
+    std::vector<Eigen::Matrix2d> inverse(faces.size());
+    std::vector<double> weight(faces.size());
+    for (std::size_t a = 0; a < faces.size(); ++a) {
+      const int f = faces[a];
       // B's triangle in its own plane: edge 0-1 along the first axis, corner 2 above it.
       const Eigen::Vector3d b0 = V_.row(F_(f, 0)), e = V_.row(F_(f, 1)).transpose() - b0,
                             g = V_.row(F_(f, 2)).transpose() - b0;
@@ -686,7 +689,6 @@ class Untangler {
       inverse[a] = R.inverse();
       weight[a] = 0.5 * R.determinant();
     }
-    if (!folds) return false;
     Eigen::MatrixX2d positions(Eigen::Index(x.size()), 2);
     for (std::size_t i = 0; i < x.size(); ++i) positions.row(Eigen::Index(i)) = x[i].transpose();
     untangle_chart(positions, fixed, local, inverse, weight);
