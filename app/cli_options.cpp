@@ -203,6 +203,12 @@ void add_pipeline_options(CLI::App& cmd, PipelineOptions& o) {
          "its end nearer the surface to the other side, so thin parts open no handles (on or off)")
       ->check(CLI::IsMember({"on", "off"}))
       ->default_str("on");
+  cmd.add_option("--morph-topology", o.morph_topology.mode,
+                 "Topology changes of the distance-field morph: auto (none that the ends do not force when both ends "
+                 "have one topology on the lattice), preserve (always: forced changes come last) or free (the plain "
+                 "linear interpolation, as in the paper)")
+      ->check(CLI::IsMember({"auto", "preserve", "free"}))
+      ->capture_default_str();
   cmd.add_flag("--ply", o.write_ply, "Also write target.ply");
   cmd.add_option("--threads", o.threads, "Worker threads (0 = all cores)")->check(whole_number(0));
   cmd.add_option_function<std::string>(

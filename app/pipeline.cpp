@@ -510,9 +510,16 @@ PipelineResult run_pipeline(const PipelineOptions& options) {
                          "; lower --voxels or raise --voxel-size");
   }
   const SurfaceCheck input_checks[2] = {input_check_a, input_check_b};  // the topology the thin features keep
-  const MorphResult morph = options.morph_method == "vim"
-                                ? build_vim_morph(A, B, options.morph, options.vim, options.extract.time_steps)
-                                : build_morph(A, B, options.morph, input_checks);
+  MorphResult morph = options.morph_method == "vim"
+                          ? build_vim_morph(A, B, options.morph, options.vim, options.extract.time_steps)
+                          : build_morph(A, B, options.morph, input_checks);
+  // The variational morph is sampled per level already and changes topology smoothly; only the linear
+  // interpolation of two distance fields is resampled.
+  MorphTopologyResult morph_topology;
+  if (morph.method == "distance") {
+    morph_topology = keep_morph_topology(morph.field, options.extract.time_steps, options.morph_topology);
+    morph.seconds += morph_topology.seconds;
+  }
   seconds["morph"] = morph.seconds;
   progress.stage("morph", morph.seconds);
 
@@ -968,6 +975,23 @@ PipelineResult run_pipeline(const PipelineOptions& options) {
     };
     report["morph"]["thin_features"] = {
         {"enabled", options.morph.thin.enabled}, {"source", thin(morph.thin_a)}, {"target", thin(morph.thin_b)}};
+    const auto lattice = [](const LatticeTopology& t) {
+      return nlohmann::json{{"euler", t.euler}, {"components", t.components}};
+    };
+    if (options.morph_topology.mode == "free")
+      report["morph"]["topology"] = {{"mode", "free"}, {"applied", false}};
+    else
+      report["morph"]["topology"] = {{"mode", options.morph_topology.mode},
+                                     {"applied", morph_topology.applied},
+                                     {"source", lattice(morph_topology.source)},
+                                     {"target", lattice(morph_topology.target)},
+                                     {"changing_points", morph_topology.changing_points},
+                                     {"delayed_points", morph_topology.delayed_points},
+                                     {"forced_flips", morph_topology.forced_flips},
+                                     {"max_delay", morph_topology.max_delay},
+                                     {"levels_changed_free", morph_topology.levels_changed_free},
+                                     {"levels_changed_kept", morph_topology.levels_changed_kept},
+                                     {"seconds", morph_topology.seconds}};
   }
   if (morph.method == "vim")
     report["morph"].update({{"samples", options.vim.samples},

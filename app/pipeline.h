@@ -10,6 +10,7 @@
 #include "mesh/label_fill.h"
 #include "mesh/metrics.h"
 #include "mesh/morph.h"
+#include "mesh/morph_topology.h"
 #include "mesh/seams.h"
 #include "mesh/slice.h"
 #include "mesh/untangle.h"
@@ -36,9 +37,11 @@ struct PipelineOptions {
   /// "distance": the distance-field morph (mesh/morph.h, Payne and Toga); "vim": the variational implicit morph
   /// (mesh/vim.h, Turk and O'Brien), the paper's morph for sphere -> bunny
   std::string morph_method = "distance";
-  VimOptions vim;          ///< samples, plane separation and normal offset of the variational implicit morph
-  ExtractOptions extract;  ///< time steps, time scale
-  LaplaceOptions laplace;  ///< solver backend and tolerance
+  VimOptions vim;  ///< samples, plane separation and normal offset of the variational implicit morph
+  /// Topology changes of the distance-field morph kept out where the ends do not force them (mesh/morph_topology.h)
+  MorphTopologyOptions morph_topology;
+  ExtractOptions extract;                    ///< time steps, time scale
+  LaplaceOptions laplace;                    ///< solver backend and tolerance
   std::vector<std::string> compare_solvers;  ///< backends also run on the same system, reported under "compare"
                                              ///< in report.json (the map uses laplace.solver only)
   /// How B and the slices get their preimages on A: "trace" follows each vertex's characteristic of grad s back

@@ -93,6 +93,23 @@ TEST(Pipeline, VariationalMorphOfConcentricSpheresMapsRadially) {
   EXPECT_EQ(report["trace"]["stalled"].get<int>(), 0);
 }
 
+TEST(Pipeline, MorphTopologyIsKeptOnlyBetweenEndsOfOneTopology) {
+  PipelineOptions o = small_options("sphere:size=0.5,center=0/0/0,res=64", "sphere:size=0.8,center=0/0/0,res=64", "cg");
+  o.morph_topology.mode = "auto";
+  const PipelineResult same = run_pipeline(o);
+  const nlohmann::json report = nlohmann::json::parse(same.report_json);
+  EXPECT_EQ(report["morph"]["topology"]["applied"], true);
+  EXPECT_EQ(report["morph"]["topology"]["levels_changed_kept"].get<int>(), 0);
+  EXPECT_GT(report["morph"]["topology"]["changing_points"].get<int>(), 0);
+  const double h = report["options"]["voxel_size"].get<double>();
+  EXPECT_LT(worst_radial_angle(same), 2.0 * h / 0.8) << "voxel " << h;
+
+  o.target = "two-spheres";
+  const nlohmann::json split = nlohmann::json::parse(run_pipeline(o).report_json);
+  EXPECT_EQ(split["morph"]["topology"]["applied"], false);
+  EXPECT_EQ(split["morph"]["topology"]["target"]["components"].get<int>(), 2);
+}
+
 INSTANTIATE_TEST_SUITE_P(Solvers, PipelineSolvers, ::testing::Values("cholmod", "cg"));
 
 /// An octahedron of radius 0.8 with every face cut into 36 triangles (146 vertices), as an OFF file: its corners
