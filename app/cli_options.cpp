@@ -209,6 +209,9 @@ void add_pipeline_options(CLI::App& cmd, PipelineOptions& o) {
                  "linear interpolation, as in the paper)")
       ->check(CLI::IsMember({"auto", "preserve", "free"}))
       ->capture_default_str();
+  cmd.add_flag("--critical-points", o.critical_points,
+               "Count the harmonic field's minima, maxima and saddles on the 4D mesh (report.json's "
+               "critical_points; the saddles' separatrices are seams of the traced map)");
   cmd.add_flag("--ply", o.write_ply, "Also write target.ply");
   cmd.add_option("--threads", o.threads, "Worker threads (0 = all cores)")->check(whole_number(0));
   cmd.add_option_function<std::string>(

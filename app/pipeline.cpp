@@ -33,6 +33,7 @@
 #include "mesh/shapes.h"
 #include "mesh/stopwatch.h"
 #include "mesh/transfer.h"
+#include "solver/critical_points.h"
 #include "solver/gradient.h"
 #include "solver/linear_solver.h"
 
@@ -564,6 +565,13 @@ PipelineResult run_pipeline(const PipelineOptions& options) {
     laplace.s = Eigen::VectorXd::Zero(mesh.vertex_count());
   }
 
+  CriticalPointResult critical;
+  if (options.critical_points && !closest_point) {
+    critical = critical_points(mesh, *stars, laplace.s);
+    seconds["critical_points"] = critical.seconds;
+    progress.stage("critical points", critical.seconds);
+  }
+
   SolverComparisonResult comparison;
   if (!options.compare_solvers.empty() && !closest_point) {
     comparison = compare_solvers(mesh, laplace.s, options.compare_solvers, options.laplace);
@@ -1019,6 +1027,24 @@ PipelineResult run_pipeline(const PipelineOptions& options) {
       {"negative_cotangent_fraction", quality.negative_cotangent_fraction},
       {"min_volume_ratio", quality.min_volume_ratio},
       {"dihedral_histogram_10deg", quality.dihedral_histogram}};
+  if (options.critical_points && !closest_point) {
+    nlohmann::json listed = nlohmann::json::array();
+    for (const int v : critical.listed)
+      listed.push_back({{"vertex", v},
+                        {"s", laplace.s(v)},
+                        {"t", mesh.time_of(v)},
+                        {"position", {mesh.V(v, 0), mesh.V(v, 1), mesh.V(v, 2)}}});
+    report["critical_points"] = {{"interior_vertices", critical.interior_vertices},
+                                 {"minima", critical.minima},
+                                 {"maxima", critical.maxima},
+                                 {"saddles", critical.saddles},
+                                 {"saddle_multiplicity", critical.saddle_multiplicity},
+                                 {"listed", listed},
+                                 {"listed_rule",
+                                  "up to 64 critical vertices by increasing s; positions in the morph "
+                                  "frame (the target's coordinates unless --align bbox)"},
+                                 {"seconds", critical.seconds}};
+  }
   report["stretch"] = nlohmann::json::parse(stretch_json(stretch));
   if (options.method == "trace" && !user_target)
     report["stalled_fill"] = {{"mode", options.stalled_fill},        {"filled", label_fill.filled},

@@ -110,6 +110,27 @@ TEST(Pipeline, MorphTopologyIsKeptOnlyBetweenEndsOfOneTopology) {
   EXPECT_EQ(split["morph"]["topology"]["target"]["components"].get<int>(), 2);
 }
 
+TEST(Pipeline, CriticalPointsOfTheHarmonicFieldAreCounted) {
+  // Concentric spheres: s is radial, no critical point. Sphere -> torus: the hole opens at one saddle, in the middle.
+  PipelineOptions o = small_options("sphere:size=0.5,center=0/0/0,res=64", "sphere:size=0.8,center=0/0/0,res=64", "cg");
+  o.critical_points = true;
+  nlohmann::json report = nlohmann::json::parse(run_pipeline(o).report_json);
+  EXPECT_GT(report["critical_points"]["interior_vertices"].get<int>(), 0);
+  EXPECT_EQ(report["critical_points"]["saddles"].get<int>(), 0);
+  EXPECT_EQ(report["critical_points"]["minima"].get<int>(), 0);
+  EXPECT_EQ(report["critical_points"]["maxima"].get<int>(), 0);
+  o.source = "sphere";
+  o.target = "torus";
+  report = nlohmann::json::parse(run_pipeline(o).report_json);
+  EXPECT_EQ(report["critical_points"]["saddles"].get<int>(), 1);
+  EXPECT_EQ(report["critical_points"]["minima"].get<int>() + report["critical_points"]["maxima"].get<int>(), 0);
+  const double h = report["options"]["voxel_size"].get<double>();
+  const auto& at = report["critical_points"]["listed"][0]["position"];
+  EXPECT_LT(std::hypot(at[0].get<double>(), at[1].get<double>(), at[2].get<double>()), 2.0 * h);
+  o.critical_points = false;
+  EXPECT_FALSE(nlohmann::json::parse(run_pipeline(o).report_json).contains("critical_points"));
+}
+
 INSTANTIATE_TEST_SUITE_P(Solvers, PipelineSolvers, ::testing::Values("cholmod", "cg"));
 
 /// An octahedron of radius 0.8 with every face cut into 36 triangles (146 vertices), as an OFF file: its corners
