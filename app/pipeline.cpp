@@ -467,6 +467,16 @@ PipelineResult run_pipeline(const PipelineOptions& options) {
   if (options.source_projection != "inverse" && options.source_projection != "closest")
     throw InvalidInput("--source-projection: unknown value '" + options.source_projection +
                        "' (choose inverse, closest)");
+  if (options.morph_topology.mode != "free" && options.morph_topology.mode != "auto" &&
+      options.morph_topology.mode != "preserve")
+    throw InvalidInput("--morph-topology: unknown value '" + options.morph_topology.mode +
+                       "' (choose free, auto, preserve)");
+  // An option that would do nothing is refused rather than ignored.
+  if (options.morph_method == "vim" && options.morph_topology.mode != "free")
+    throw InvalidInput("--morph-topology " + options.morph_topology.mode +
+                       ": only the distance-field morph is resampled (--morph vim samples its own time levels)");
+  if (options.critical_points && options.method == "closest-point")
+    throw InvalidInput("--critical-points: the closest-point method solves no harmonic field to classify");
   // Each time once, in the order given: a repeated time would write the same file twice and list it twice.
   std::vector<double> slice_times;
   for (double t : options.slices) {

@@ -131,6 +131,33 @@ TEST(Pipeline, CriticalPointsOfTheHarmonicFieldAreCounted) {
   EXPECT_FALSE(nlohmann::json::parse(run_pipeline(o).report_json).contains("critical_points"));
 }
 
+TEST(Pipeline, OptionsThatWouldDoNothingAreRefusedBeforeAnyWork) {
+  const std::filesystem::path dir = std::filesystem::temp_directory_path() / "morphmap_pipeline_noop_options";
+  std::filesystem::remove_all(dir);
+  PipelineOptions o = small_options("sphere", "torus", "cg");
+  o.output_dir = dir.string();
+  const auto refused = [&](const PipelineOptions& options, const std::string& words) {
+    try {
+      run_pipeline(options);
+      ADD_FAILURE() << "accepted, expected: " << words;
+    } catch (const InvalidInput& e) {
+      EXPECT_NE(std::string(e.what()).find(words), std::string::npos) << e.what();
+    }
+    EXPECT_FALSE(std::filesystem::exists(dir));
+  };
+  PipelineOptions vim = o;
+  vim.morph_method = "vim";
+  vim.morph_topology.mode = "auto";
+  refused(vim, "--morph-topology auto");
+  PipelineOptions closest = o;
+  closest.method = "closest-point";
+  closest.critical_points = true;
+  refused(closest, "--critical-points");
+  PipelineOptions unknown = o;
+  unknown.morph_topology.mode = "always";
+  refused(unknown, "--morph-topology: unknown value 'always'");
+}
+
 INSTANTIATE_TEST_SUITE_P(Solvers, PipelineSolvers, ::testing::Values("cholmod", "cg"));
 
 /// An octahedron of radius 0.8 with every face cut into 36 triangles (146 vertices), as an OFF file: its corners
