@@ -545,6 +545,11 @@ PipelineResult run_pipeline(const PipelineOptions& options) {
                          "; lower --voxels or --time-steps");
   };
   ExtractResult extract = extract_hypersurface(morph.field, extract_options);
+  // The samples are read by the extraction only; a resampled morph's levels ((K + 1) floats a lattice point) would
+  // otherwise still be held at the run's peak in the Laplace stage.
+  std::vector<float>().swap(morph.field.levels);
+  std::vector<float>().swap(morph.field.dA);
+  std::vector<float>().swap(morph.field.dB);
   seconds["extract"] = extract.seconds;
   progress.stage("extract", extract.seconds);
   const TetMesh4& mesh = extract.mesh;
