@@ -581,7 +581,7 @@ PipelineResult run_pipeline(const PipelineOptions& options) {
   }
 
   CriticalPointResult critical;
-  if (options.critical_points && !closest_point) {
+  if (options.critical_points) {  // refused above with the closest-point method, which solves no field
     critical = critical_points(mesh, *stars, laplace.s);
     seconds["critical_points"] = critical.seconds;
     progress.stage("critical points", critical.seconds);
@@ -1042,7 +1042,7 @@ PipelineResult run_pipeline(const PipelineOptions& options) {
       {"negative_cotangent_fraction", quality.negative_cotangent_fraction},
       {"min_volume_ratio", quality.min_volume_ratio},
       {"dihedral_histogram_10deg", quality.dihedral_histogram}};
-  if (options.critical_points && !closest_point) {
+  if (options.critical_points) {
     nlohmann::json listed = nlohmann::json::array();
     for (const int v : critical.listed)
       listed.push_back({{"vertex", v},

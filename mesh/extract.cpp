@@ -158,8 +158,8 @@ struct Lattice {
   // The one place a lattice value is computed, so every cell sharing a lattice point sees the same float.
   float value(std::int64_t idx3, int level) const {
     const double t = double(level) / K;
-    double d = field.levels.empty() ? (1.0 - t) * field.dA[std::size_t(idx3)] + t * field.dB[std::size_t(idx3)]
-                                    : double(field.levels[std::size_t(level * n3 + idx3)]);
+    double d =
+        field.levels.empty() ? field.linear_value(idx3, t) : double(field.levels[std::size_t(level * n3 + idx3)]);
     if (std::abs(d) < snap) d = d < 0.0 ? -snap : snap;
     return float(d);
   }

@@ -70,6 +70,11 @@ struct MorphField {
     return i + std::int64_t(dims.x()) * (j + std::int64_t(dims.y()) * k);
   }
   Eigen::Vector3d point(int i, int j, int k) const { return origin + voxel_size * Eigen::Vector3d(i, j, k); }
+  /// The distance-field morph (1 - t) dA + t dB at lattice point q: the one formula the extraction and the resampling
+  /// of mesh/morph_topology.h share, so that a point they both evaluate gets the same bits.
+  double linear_value(std::int64_t q, double t) const {
+    return (1.0 - t) * dA[std::size_t(q)] + t * dB[std::size_t(q)];
+  }
 };
 
 struct MorphResult {

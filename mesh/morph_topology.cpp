@@ -222,8 +222,7 @@ MorphTopologyResult keep_morph_topology(MorphField& field, int time_steps, const
   for (std::int64_t q = 0; q < n3; ++q)
     for (int l = 0; l <= K; ++l) {
       const double t = double(l) / K;
-      field.levels[std::size_t(l) * std::size_t(n3) + std::size_t(q)] =
-          float((1.0 - t) * field.dA[std::size_t(q)] + t * field.dB[std::size_t(q)]);
+      field.levels[std::size_t(l) * std::size_t(n3) + std::size_t(q)] = float(field.linear_value(q, t));
     }
   for (std::size_t s = 0; s < changing.size(); ++s) {
     const std::int64_t q = changing[s];
@@ -253,8 +252,7 @@ MorphTopologyResult keep_morph_topology(MorphField& field, int time_steps, const
   std::vector<float> level(static_cast<std::size_t>(n3));
   for (int l = 1; l < K; ++l) {
     const double t = double(l) / K;
-    for (std::int64_t q = 0; q < n3; ++q)
-      level[std::size_t(q)] = float((1.0 - t) * field.dA[std::size_t(q)] + t * field.dB[std::size_t(q)]);
+    for (std::int64_t q = 0; q < n3; ++q) level[std::size_t(q)] = float(field.linear_value(q, t));
     const LatticeTopology free = lattice_topology(field, level);
     std::copy_n(field.levels.begin() + std::ptrdiff_t(std::size_t(l) * std::size_t(n3)), n3, level.begin());
     const LatticeTopology kept = lattice_topology(field, level);
