@@ -191,6 +191,13 @@ void add_pipeline_options(CLI::App& cmd, PipelineOptions& o) {
       ->check(CLI::IsMember({"on", "off"}))
       ->default_str("on");
   cmd.add_option_function<std::string>(
+         "--heal-seams", [&o](const std::string& value) { o.untangle.heal_seams = value == "on"; },
+         "With --fold-repair on, also lay out again the patches around topological seams that the ends' topology "
+         "does not force (a disk around the seam whose boundary is a simple loop on the source), which closes them "
+         "(on or off)")
+      ->check(CLI::IsMember({"on", "off"}))
+      ->default_str("on");
+  cmd.add_option_function<std::string>(
          "--stalled-fill", [&o](const std::string& value) { o.stalled_fill = value; },
          "Label the target's vertices whose characteristic stalls (parts born during the morph) from the traced "
          "vertices around them, by a mean-value convex combination, instead of the point of the source nearest to "

@@ -146,9 +146,12 @@ class Untangler {
     result.seam_triangles = count(kSeam);
     const std::vector<int> stretched = stretched_faces();
     result.stretched_before = std::int64_t(stretched.size());
-    if (!options_.enabled || result.folded_before + result.collapsed_before + result.stretched_before == 0) {
+    const std::int64_t seams_to_heal = options_.heal_seams && options_.rebuild_patches ? result.seam_triangles : 0;
+    if (!options_.enabled ||
+        result.folded_before + result.collapsed_before + result.stretched_before + seams_to_heal == 0) {
       result.folded_after = result.folded_before;
       result.collapsed_after = result.collapsed_before;
+      result.seam_triangles_after = result.seam_triangles;
       return result;
     }
     // Vertices of seam triangles stay where they are: the seam split reads their labels on either side.
@@ -238,6 +241,7 @@ class Untangler {
     reclassify_region();
     result.stretched_after = std::int64_t(stretched_faces().size());
     result.folded_after = count(kFolded);
+    result.seam_triangles_after = count(kSeam);
     result.collapsed_after = count(kCollapsed);
     result.vertices_moved = std::int64_t(std::count(moved_.begin(), moved_.end(), char(1)));
     return result;
@@ -582,6 +586,44 @@ class Untangler {
     return state == 1;
   }
 
+  /// Adds to the patch (`inside`, flagged in `member`) every part of B that the patch cuts off from the largest part
+  /// outside it, so that rings around an ear's base take the ear beyond them and make a disk, not an annulus.
+  void enclose(std::vector<int>& inside, std::vector<char>& member) const {
+    const Eigen::Index nv = V_.rows();
+    std::vector<int> part(std::size_t(nv), -1);
+    std::vector<std::vector<int>> parts;
+    std::vector<char> touches;  // the part borders the patch (parts of B's other components do not)
+    for (Eigen::Index v0 = 0; v0 < nv; ++v0) {
+      if (member[std::size_t(v0)] || part[std::size_t(v0)] >= 0) continue;
+      const int id = int(parts.size());
+      parts.emplace_back();
+      touches.push_back(0);
+      std::vector<int> stack{int(v0)};
+      part[std::size_t(v0)] = id;
+      while (!stack.empty()) {
+        const int v = stack.back();
+        stack.pop_back();
+        parts.back().push_back(v);
+        for (int j = vf_.begin(v); j < vf_.end(v); ++j)
+          for (int k = 0; k < 3; ++k) {
+            const int u = F_(vf_.face(j), k);
+            if (member[std::size_t(u)]) touches.back() = 1;
+            if (member[std::size_t(u)] || part[std::size_t(u)] >= 0) continue;
+            part[std::size_t(u)] = id;
+            stack.push_back(u);
+          }
+      }
+    }
+    std::size_t largest = parts.size();
+    for (std::size_t c = 0; c < parts.size(); ++c)
+      if (touches[c] && (largest == parts.size() || parts[c].size() > parts[largest].size())) largest = c;
+    for (std::size_t c = 0; c < parts.size(); ++c) {
+      if (c == largest || !touches[c]) continue;
+      for (const int u : parts[c]) member[std::size_t(u)] = 1;
+      inside.insert(inside.end(), parts[c].begin(), parts[c].end());
+    }
+  }
+
   /// Lays out again, in one chart of A, each cluster of bad triangles with rings around it (see
   /// UntangleOptions::rebuild_patches), cluster by cluster in order of their first triangle. Returns the inner
   /// vertices of the rebuilt patches.
@@ -590,13 +632,17 @@ class Untangler {
     std::vector<char> tried(std::size_t(nf), 0), seen(std::size_t(nv), 0);
     std::vector<int> rebuilt;
     for (Eigen::Index f0 = 0; f0 < nf; ++f0) {
-      if (!bad(state_[std::size_t(f0)]) || tried[std::size_t(f0)]) continue;
+      // Seam triangles seed clusters too (UntangleOptions::heal_seams).
+      auto seed = [&](char state) { return bad(state) || (options_.heal_seams && state == kSeam); };
+      if (!seed(state_[std::size_t(f0)]) || tried[std::size_t(f0)]) continue;
+      bool seam_cluster = false;
       // The cluster: bad triangles joined through shared vertices.
       std::vector<int> seeds, stack{int(f0)};
       tried[std::size_t(f0)] = 1;
       while (!stack.empty()) {
         const int f = stack.back();
         stack.pop_back();
+        seam_cluster = seam_cluster || state_[std::size_t(f)] == kSeam;
         for (int k = 0; k < 3; ++k) {
           const int v = F_(f, k);
           if (seen[std::size_t(v)]) continue;
@@ -604,7 +650,7 @@ class Untangler {
           seeds.push_back(v);
           for (int j = vf_.begin(v); j < vf_.end(v); ++j) {
             const int g = vf_.face(j);
-            if (bad(state_[std::size_t(g)]) && !tried[std::size_t(g)]) {
+            if (seed(state_[std::size_t(g)]) && !tried[std::size_t(g)]) {
               tried[std::size_t(g)] = 1;
               stack.push_back(g);
             }
@@ -635,6 +681,7 @@ class Untangler {
         if (rings < options_.patch_rings || rings % options_.patch_rings != 0 ||
             ((rings / options_.patch_rings) & (rings / options_.patch_rings - 1)) != 0)
           continue;
+        enclose(inside, member);
         std::vector<int> faces;
         for (const int v : inside)
           for (int j = vf_.begin(v); j < vf_.end(v); ++j) {
@@ -649,6 +696,7 @@ class Untangler {
         std::vector<int> moved;
         if (lay_out_patch(faces, moved, result)) {
           ++result.patches_rebuilt;
+          result.seams_healed += seam_cluster;
           result.patch_vertices += std::int64_t(moved.size());
           rebuilt.insert(rebuilt.end(), moved.begin(), moved.end());
           break;

@@ -4,6 +4,7 @@
 #include <gtest/gtest.h>
 #include <tbb/global_control.h>
 
+#include <Eigen/Geometry>
 #include <cmath>
 #include <limits>
 #include <vector>
@@ -279,6 +280,48 @@ TEST(Untangle, SmoothingSpreadsStretchedTrianglesAcrossASeamWithoutCrossingIt) {
   }
 }
 
+// The identity map with a cap of labels (about six rings) carried a quarter turn away over the sphere: the cap lands,
+// whole and unfolded, on another part of A, and the triangles of its rim span the seam threshold. So a born ear
+// joined to the head maps on sphere -> bunny: a seam no topology forces, and a patch of A covered twice.
+Eigen::MatrixXd carried_cap(const Surface& A) {
+  const Eigen::Vector3d c = Eigen::Vector3d(1.0, 0.2, 0.1).normalized();
+  const Eigen::Vector3d axis = c.cross(Eigen::Vector3d::UnitZ()).normalized();
+  const Eigen::Matrix3d turn = Eigen::AngleAxisd(0.5 * M_PI, axis).toRotationMatrix();
+  return moved_disk(A, c, 6.0, [&](const Eigen::Vector3d& p) { return Eigen::Vector3d(turn * p); });
+}
+
+TEST(Untangle, HealsASeamThatTheTopologyDoesNotForce) {
+  const Surface A = fine_sphere();
+  const SurfaceLocator locator(A);
+  const Eigen::MatrixXd damaged = carried_cap(A);
+  ASSERT_GT(seam_triangles(A, damaged).size(), 20u);
+  const StretchResult before = measure_stretch(A, A.V, A.F, damaged);
+  ASSERT_GT(before.coverage, 1.02);  // the cap covers its landing place a second time
+
+  Eigen::MatrixXd labels = damaged;
+  const UntangleResult r = untangle_labels(A, locator, A.V, A.F, labels, enabled());
+  EXPECT_GT(r.seam_triangles, 20);
+  EXPECT_EQ(r.seam_triangles_after, 0);
+  EXPECT_GE(r.seams_healed, 1);
+  EXPECT_TRUE(seam_triangles(A, labels).empty());
+  const StretchResult after = measure_stretch(A, A.V, A.F, labels);
+  EXPECT_EQ(after.folded + after.collapsed, 0);
+  EXPECT_NEAR(after.coverage, 1.0, 0.02);
+  EXPECT_LT(after.max_sigma1, 3.0);
+  EXPECT_GT(after.min_sigma2, 0.3);
+
+  // Without the healing the seam stays, and so does the double cover.
+  UntangleOptions keep = enabled();
+  keep.heal_seams = false;
+  Eigen::MatrixXd kept = damaged;
+  const UntangleResult without = untangle_labels(A, locator, A.V, A.F, kept, keep);
+  EXPECT_EQ(without.seams_healed, 0);
+  EXPECT_EQ(without.seam_triangles_after, without.seam_triangles);
+  const StretchResult kept_stretch = measure_stretch(A, A.V, A.F, kept);
+  EXPECT_GT(kept_stretch.coverage, 1.02);
+  EXPECT_GT(kept_stretch.folded + kept_stretch.collapsed, 0);  // long seam triangles facing against A
+}
+
 TEST(Untangle, LeavesAGoodMapAlone) {
   const Surface A = unit_sphere();
   const SurfaceLocator locator(A);
@@ -307,9 +350,10 @@ TEST(Untangle, DisabledOnlyCounts) {
 TEST(Untangle, ResultDoesNotDependOnTheThreadCount) {
   const Surface coarse = unit_sphere();
   const Surface fine = fine_sphere();
-  // The mirrored star's patch layout folds in its chart and is untangled (PatchLayoutThatFoldsInItsChartIsUntangled).
+  // The mirrored star's patch layout folds in its chart and is untangled (PatchLayoutThatFoldsInItsChartIsUntangled);
+  // the carried cap's seam is healed.
   for (const auto& [A, damaged] : {std::pair{&coarse, damaged_labels(coarse)}, std::pair{&fine, squeezed_disk(fine)},
-                                   std::pair{&fine, mirrored_star(fine)}}) {
+                                   std::pair{&fine, mirrored_star(fine)}, std::pair{&fine, carried_cap(fine)}}) {
     const SurfaceLocator locator(*A);
     Eigen::MatrixXd one = damaged, two = damaged;
     {
