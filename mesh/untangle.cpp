@@ -255,7 +255,8 @@ class Untangler {
   void smooth(UntangleResult& result) {
     const auto classes = colour_classes();
     std::vector<char> active(std::size_t(V_.rows()), 1), next(std::size_t(V_.rows()), 0);
-    for (int sweep = 0; sweep < options_.smoothing_sweeps; ++sweep) {
+    const int sweeps = result.seams_healed > 0 ? options_.healed_smoothing_sweeps : options_.smoothing_sweeps;
+    for (int sweep = 0; sweep < sweeps; ++sweep) {
       const std::int64_t moves =
           run_sweep(classes, active, &next, [&](int v, Ring& ring) { return smooth_vertex(v, ring); });
       result.smoothing_moves += moves;
@@ -587,41 +588,50 @@ class Untangler {
   }
 
   /// Adds to the patch (`inside`, flagged in `member`) every part of B that the patch cuts off from the largest part
-  /// outside it, so that rings around an ear's base take the ear beyond them and make a disk, not an annulus.
-  void enclose(std::vector<int>& inside, std::vector<char>& member) const {
-    const Eigen::Index nv = V_.rows();
-    std::vector<int> part(std::size_t(nv), -1);
+  /// outside it, so that rings around an ear's base take the ear beyond them and make a disk, not an annulus. Each
+  /// part beside the patch is explored only up to `limit` vertices (a larger one could not join it anyway), so the
+  /// cost is that of the small parts, not of B.
+  void enclose(std::vector<int>& inside, std::vector<char>& member, std::int64_t limit) {
+    if (part_of_.size() != std::size_t(V_.rows())) part_of_.assign(std::size_t(V_.rows()), -1);
     std::vector<std::vector<int>> parts;
-    std::vector<char> touches;  // the part borders the patch (parts of B's other components do not)
-    for (Eigen::Index v0 = 0; v0 < nv; ++v0) {
-      if (member[std::size_t(v0)] || part[std::size_t(v0)] >= 0) continue;
-      const int id = int(parts.size());
-      parts.emplace_back();
-      touches.push_back(0);
-      std::vector<int> stack{int(v0)};
-      part[std::size_t(v0)] = id;
-      while (!stack.empty()) {
-        const int v = stack.back();
-        stack.pop_back();
-        parts.back().push_back(v);
-        for (int j = vf_.begin(v); j < vf_.end(v); ++j)
-          for (int k = 0; k < 3; ++k) {
-            const int u = F_(vf_.face(j), k);
-            if (member[std::size_t(u)]) touches.back() = 1;
-            if (member[std::size_t(u)] || part[std::size_t(u)] >= 0) continue;
-            part[std::size_t(u)] = id;
-            stack.push_back(u);
+    std::vector<char> large;
+    for (std::size_t a = 0, n = inside.size(); a < n; ++a)
+      for (int j = vf_.begin(inside[a]); j < vf_.end(inside[a]); ++j)
+        for (int k = 0; k < 3; ++k) {
+          const int start = F_(vf_.face(j), k);
+          if (member[std::size_t(start)] || part_of_[std::size_t(start)] >= 0) continue;
+          const int id = int(parts.size());
+          parts.emplace_back(std::vector<int>{start});
+          large.push_back(0);
+          part_of_[std::size_t(start)] = id;
+          for (std::size_t next = 0; next < parts.back().size() && !large.back(); ++next) {
+            const int v = parts.back()[next];
+            for (int i = vf_.begin(v); i < vf_.end(v) && !large.back(); ++i)
+              for (int m = 0; m < 3; ++m) {
+                const int u = F_(vf_.face(i), m);
+                if (member[std::size_t(u)] || part_of_[std::size_t(u)] == id) continue;
+                // A vertex of an earlier part: the two are one, and that one was large (or this would be it).
+                if (part_of_[std::size_t(u)] >= 0 || std::int64_t(parts.back().size()) >= limit) {
+                  large.back() = 1;
+                  break;
+                }
+                part_of_[std::size_t(u)] = id;
+                parts.back().push_back(u);
+              }
           }
+        }
+    std::size_t keep = parts.size();  // the part that stays outside when none is large (a small component of B)
+    if (std::find(large.begin(), large.end(), char(1)) == large.end())
+      for (std::size_t c = 0; c < parts.size(); ++c)
+        if (keep == parts.size() || parts[c].size() > parts[keep].size()) keep = c;
+    for (std::size_t c = 0; c < parts.size(); ++c) {
+      if (!large[c] && c != keep) {
+        for (const int u : parts[c]) member[std::size_t(u)] = 1;
+        inside.insert(inside.end(), parts[c].begin(), parts[c].end());
       }
     }
-    std::size_t largest = parts.size();
-    for (std::size_t c = 0; c < parts.size(); ++c)
-      if (touches[c] && (largest == parts.size() || parts[c].size() > parts[largest].size())) largest = c;
-    for (std::size_t c = 0; c < parts.size(); ++c) {
-      if (c == largest || !touches[c]) continue;
-      for (const int u : parts[c]) member[std::size_t(u)] = 1;
-      inside.insert(inside.end(), parts[c].begin(), parts[c].end());
-    }
+    for (const std::vector<int>& part : parts)
+      for (const int u : part) part_of_[std::size_t(u)] = -1;
   }
 
   /// Lays out again, in one chart of A, each cluster of bad triangles with rings around it (see
@@ -664,7 +674,9 @@ class Untangler {
       std::vector<char> member(std::size_t(nv), 0);
       for (const int v : inside) member[std::size_t(v)] = 1;
       std::vector<int> frontier = seeds;
-      for (int rings = 1; rings <= options_.max_patch_rings; ++rings) {
+      // A patch that has reached a seam may grow as far as a seam's cluster (UntangleOptions::max_seam_patch_rings).
+      bool near_seam = options_.heal_seams && seam_cluster;
+      for (int rings = 1; rings <= (near_seam ? options_.max_seam_patch_rings : options_.max_patch_rings); ++rings) {
         std::vector<int> next;
         for (const int v : frontier)
           for (int j = vf_.begin(v); j < vf_.end(v); ++j)
@@ -676,12 +688,13 @@ class Untangler {
             }
         inside.insert(inside.end(), next.begin(), next.end());
         frontier = std::move(next);
-        if (std::int64_t(inside.size()) > options_.max_patch_vertices) break;
+        if (std::int64_t(inside.size()) > (near_seam ? options_.max_seam_patch_vertices : options_.max_patch_vertices))
+          break;
         // Tried at patch_rings, then at each doubling (2, 4, 8 rings by default).
         if (rings < options_.patch_rings || rings % options_.patch_rings != 0 ||
             ((rings / options_.patch_rings) & (rings / options_.patch_rings - 1)) != 0)
           continue;
-        enclose(inside, member);
+        if (options_.heal_seams) enclose(inside, member, options_.max_seam_patch_vertices);
         std::vector<int> faces;
         for (const int v : inside)
           for (int j = vf_.begin(v); j < vf_.end(v); ++j) {
@@ -693,10 +706,11 @@ class Untangler {
           }
         std::sort(faces.begin(), faces.end());
         faces.erase(std::unique(faces.begin(), faces.end()), faces.end());
+        for (const int f : faces) near_seam = near_seam || (options_.heal_seams && state_[std::size_t(f)] == kSeam);
         std::vector<int> moved;
         if (lay_out_patch(faces, moved, result)) {
           ++result.patches_rebuilt;
-          result.seams_healed += seam_cluster;
+          result.seams_healed += near_seam;
           result.patch_vertices += std::int64_t(moved.size());
           rebuilt.insert(rebuilt.end(), moved.begin(), moved.end());
           break;
@@ -908,6 +922,7 @@ class Untangler {
   const UntangleOptions& options_;
   const VertexFaces vf_;
   std::vector<char> state_, wall_, moved_, in_region_;
+  std::vector<int> part_of_;  // enclose(): the part of B outside a patch each vertex was found in, -1 between calls
   std::vector<Eigen::Vector3d> unit_normal_;  // A's outward unit face normals (every chart reads them)
   struct Shape {
     Eigen::Matrix2d inverse;  // P^-1, P a triangle's B edges from the vertex in its own plane

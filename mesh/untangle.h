@@ -59,13 +59,13 @@ struct UntangleOptions {
   int stretch_rounds = 3;
   /// A further round runs only when at most this fraction of the last round's stretched triangles is still stretched.
   double stretch_round_fraction = 0.5;
-  /// Sweeps of symmetric Dirichlet descent over the region after the untangling, per round (fewer when one moves
-  /// nothing). Each moves a vertex one damped Newton step, so a healed seam's patch (an ear laid out again inside
-  /// its loop) spreads its squeeze slowly: measured with heal_seams on sphere -> bunny, 150 / 400 / 1000 / 3000 sweeps
-  /// gave variance 0.28 / 0.25 / 0.20 / 0.17, p99 3.77 / 3.62 / 3.21 / 2.94, min compression 0.011 / 0.010 / 0.022 /
-  /// 0.073, for a repair of 1.4 / 1.5 / 2.0 / 4.2 s; sphere -> spot's min compression 0.080 at 150 and 400, 0.176 at
-  /// 1000.
-  int smoothing_sweeps = 1000;
+  int smoothing_sweeps = 150;  ///< sweeps of symmetric Dirichlet descent over the region after the untangling
+  /// Sweeps per round instead when a seam was healed. Each sweep moves a vertex one damped Newton step, so a healed
+  /// patch (an ear laid out again inside its loop) spreads its squeeze slowly: on sphere -> bunny, 150 / 400 / 1000 /
+  /// 3000 sweeps gave variance 0.28 / 0.25 / 0.20 / 0.17, p99 3.77 / 3.62 / 3.21 / 2.94, min compression 0.011 /
+  /// 0.010 / 0.022 / 0.073, for a repair of 1.4 / 1.5 / 2.0 / 4.2 s. Every repair that long took cow -> horse's (63
+  /// voxels, nothing healed) from 2.5 to 8-10 s.
+  int healed_smoothing_sweeps = 1000;
   /// A smoothing step counts as a move (its vertex's neighbours are visited in the next sweep) when its squared length
   /// exceeds this times the mean area of the vertex's triangles. Measured on sphere -> bunny at 40 voxels (300 sweeps,
   /// the cap, and 1.0 M moves over 4.3 k vertices at 1e-6): 1e-4 took the repair 0.97 -> 0.55 s but max 10.5 -> 13.8,
@@ -92,11 +92,15 @@ struct UntangleOptions {
   /// the seam split), at the cost of the mean (1.17 -> 1.22) and the variance (0.11 -> 0.17).
   bool heal_seams = true;
   int patch_rings = 2;
-  /// Rings of the largest patch tried. The ear's seam on sphere -> bunny closes at 16, with the ear's tip enclosed.
-  int max_patch_rings = 16;
-  /// Patches stop growing at this many vertices. When the rings around a cluster cut B in pieces, the pieces other
-  /// than the largest (the part of an ear beyond a ring around its base) join the patch, so that it is a disk.
-  std::int64_t max_patch_vertices = 4000;
+  int max_patch_rings = 8;                 ///< rings of the largest patch tried
+  std::int64_t max_patch_vertices = 2000;  ///< patches stop growing at this many vertices
+  /// The same two limits for a cluster that holds seam triangles. The ear's seam on sphere -> bunny closes at 16
+  /// rings, with the ear's tip enclosed: when the rings around a cluster cut B in pieces, the pieces other than the
+  /// largest (the part of an ear beyond a ring around its base) join the patch, so that it is a disk. Growing every
+  /// cluster that far took the repair of sphere -> bunny at 48 voxels from 2 to 11-29 s and cow -> horse's (63
+  /// voxels) to 16 s.
+  int max_seam_patch_rings = 16;
+  std::int64_t max_seam_patch_vertices = 4000;
   double max_patch_bad_fraction = 0.25;  ///< a layout may leave at most this fraction of the patch's bad triangles
   double min_patch_area_ratio = 0.01;    ///< nor any triangle below this fraction of its (scaled) area on B
 };
