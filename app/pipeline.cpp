@@ -806,6 +806,7 @@ PipelineResult run_pipeline(const PipelineOptions& options) {
   // the labels of B's 4D vertices, so they move with them (a user's mesh has no 4D vertices).
   UntangleResult untangle;
   Eigen::MatrixXd target_seam_labels;  // the 4D labels the target's seam split reads, when the repair moved some
+  std::vector<char> relabelled;        // B's vertices the repair moved (the seam split keeps their triangles whole)
   const bool repair = options.untangle.enabled && !closest_point;
   if (repair) {  // off (the default), not even its classification runs: a closest-point query per triangle
     UntangleOptions untangle_options = options.untangle;
@@ -817,6 +818,8 @@ PipelineResult run_pipeline(const PipelineOptions& options) {
       target_seam_labels = target_labels_4d.size() > 0 ? target_labels_4d : seam_labels;
     for (Eigen::Index i = 0; i < repaired.rows() && untangle.vertices_moved > 0; ++i) {
       if (repaired.row(i) == before.row(i)) continue;
+      if (relabelled.empty()) relabelled.assign(std::size_t(repaired.rows()), 0);
+      relabelled[std::size_t(i)] = 1;
       result.target.labels.row(i) = repaired.row(i);
       hits[std::size_t(i)] = locator.closest(repaired.row(i).transpose());  // its face and weights, for the UVs
       if (!user_target) target_seam_labels.row(result.target.source_edge(i, 0)) = repaired.row(i);
@@ -857,7 +860,7 @@ PipelineResult run_pipeline(const PipelineOptions& options) {
     const Eigen::MatrixXd& labels_4d = target_seam_labels.size() > 0 ? target_seam_labels
                                        : target_labels_4d.size() > 0 ? target_labels_4d
                                                                      : seam_labels;
-    result.target_seams = split_seams(result.target, mesh, labels_4d, A, locator, target_seam_options);
+    result.target_seams = split_seams(result.target, mesh, labels_4d, A, locator, target_seam_options, relabelled);
   }
   for (SliceOut& s : slices) s.seams = split_seams(s.mesh, mesh, seam_labels, A, locator, seam_options);
   const Eigen::MatrixXd seam_hits = points_of(locator.closest_all(result.target_seams.labels));

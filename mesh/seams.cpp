@@ -122,13 +122,15 @@ double polygon_area2(const Polygon& polygon) {
 class TopologicalPass {
  public:
   TopologicalPass(const SliceMesh& slice, const Eigen::MatrixXd& slice_labels, const TetMesh4& mesh,
-                  const std::function<Eigen::Vector3d(int)>& label_of, double threshold, double diagonal)
+                  const std::function<Eigen::Vector3d(int)>& label_of, double threshold, double diagonal,
+                  const std::vector<char>& relabelled)
       : slice_(slice),
         slice_labels_(slice_labels),
         mesh_(mesh),
         label_of_(label_of),
         threshold_(threshold),
-        quantum_(1e-10 * diagonal) {
+        quantum_(1e-10 * diagonal),
+        relabelled_(relabelled) {
     const Eigen::Index nv = slice.V.rows();
     for (Eigen::Index v = 0; v < nv; ++v) out_.positions.emplace_back(slice.V.row(v).transpose());
     original_vertex_.assign(std::size_t(nv), -1);
@@ -137,7 +139,7 @@ class TopologicalPass {
   LabelledMesh run(bool enabled, SeamResult& result) {
     for (Eigen::Index f = 0; f < slice_.F.rows(); ++f) {
       const int tet = slice_.source_tet[std::size_t(f)];
-      if (!enabled || !split_face(f, tet, result)) {
+      if (!enabled || repaired_whole(f) || !split_face(f, tet, result)) {
         std::array<int, 3> face{};
         for (int k = 0; k < 3; ++k) face[std::size_t(k)] = original(slice_.F(f, k));
         add_face(face, int(f));
@@ -175,6 +177,17 @@ class TopologicalPass {
     if (face[0] == face[1] || face[1] == face[2] || face[2] == face[0]) return;
     out_.faces.push_back(face);
     out_.source_face.push_back(source);
+  }
+
+  // Whether face f's corners were all relabelled after the transport and its labels span no seam (see split_seams).
+  bool repaired_whole(Eigen::Index f) const {
+    if (relabelled_.empty()) return false;
+    for (int k = 0; k < 3; ++k) {
+      if (!relabelled_[std::size_t(slice_.F(f, k))]) return false;
+      if ((slice_labels_.row(slice_.F(f, k)) - slice_labels_.row(slice_.F(f, (k + 1) % 3))).norm() > threshold_)
+        return false;
+    }
+    return true;
   }
 
   // Cuts face f by the critical plane(s) of its source tet; false when the tet spans no seam.
@@ -345,6 +358,7 @@ class TopologicalPass {
   const std::function<Eigen::Vector3d(int)>& label_of_;
   double threshold_;
   double quantum_;
+  const std::vector<char>& relabelled_;
   LabelledMesh out_;
   std::vector<int> original_vertex_;
   std::map<std::tuple<int, long long, long long, long long>, int> vertex_of_;
@@ -525,7 +539,7 @@ struct EdgeKeyHash {
 }  // namespace
 
 SeamResult split_seams(const SliceMesh& slice, const TetMesh4& mesh, const Eigen::MatrixXd& labels, const Surface& A,
-                       const SurfaceLocator& locator, const SeamOptions& options) {
+                       const SurfaceLocator& locator, const SeamOptions& options, const std::vector<char>& relabelled) {
   const auto start = Clock::now();
   if (slice.labels.rows() != slice.V.rows() || slice.labels.cols() != 3)
     throw InvalidInput("split_seams: the slice has no labels");
@@ -533,6 +547,8 @@ SeamResult split_seams(const SliceMesh& slice, const TetMesh4& mesh, const Eigen
     throw InvalidInput("split_seams: labels must be #mesh.V by 3");
   if (slice.source_tet.size() != std::size_t(slice.F.rows()) || slice.source_edge.rows() != slice.V.rows())
     throw InvalidInput("split_seams: the slice lacks provenance (source_tet, source_edge)");
+  if (!relabelled.empty() && relabelled.size() != std::size_t(slice.V.rows()))
+    throw InvalidInput("split_seams: relabelled must have one flag per slice vertex");
 
   SeamResult result;
   const double diagonal = bounding_box(A.V).diagonal().norm();
@@ -560,8 +576,8 @@ SeamResult split_seams(const SliceMesh& slice, const TetMesh4& mesh, const Eigen
   }
 
   // Topological pass.
-  LabelledMesh mid =
-      TopologicalPass(slice, slice_labels, mesh, label_of, result.threshold, diagonal).run(options.topological, result);
+  LabelledMesh mid = TopologicalPass(slice, slice_labels, mesh, label_of, result.threshold, diagonal, relabelled)
+                         .run(options.topological, result);
   result.topological_seam_curves = count_curves(mid.cut_edges);
   {
     // Regions: cut triangles joined through shared corners. Where a neck pinches off, the labels around the

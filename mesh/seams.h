@@ -92,9 +92,13 @@ struct SeamResult {
 };
 
 /// Splits `slice` (target_boundary or slice_at of `mesh` with vertex labels `labels`, #mesh.V by 3) along
-/// topological seams and, when A has UVs, along A's texture seams. `locator` must be built on A.
+/// topological seams and, when A has UVs, along A's texture seams. `locator` must be built on A. `relabelled`
+/// (empty, or #slice.V flags) marks the slice's vertices whose labels were replaced after the transport (the fold
+/// repair): a triangle whose corners are all relabelled and whose own labels span no seam is not cut, since the
+/// labels of its source tet's other vertices are the ones the repair replaced.
 SeamResult split_seams(const SliceMesh& slice, const TetMesh4& mesh, const Eigen::MatrixXd& labels, const Surface& A,
-                       const SurfaceLocator& locator, const SeamOptions& options = {});
+                       const SurfaceLocator& locator, const SeamOptions& options = {},
+                       const std::vector<char>& relabelled = {});
 
 /// Number of connected curves formed by edges (#E by 2 vertex ids).
 std::int64_t count_curves(const std::vector<std::array<int, 2>>& edges);

@@ -9,6 +9,7 @@
 #include <nlohmann/json.hpp>
 
 #include "app/pipeline.h"
+#include "mesh/errors.h"
 #include "mesh/shapes.h"
 
 namespace morphmap {
@@ -37,22 +38,30 @@ TetMesh4 one_tet() {
   return mesh;
 }
 
+// B's only triangle of one_tet() with these labels (#4 by 3, the last the tet's vertex on A) split on the unit sphere,
+// topological seams only.
+SeamResult split_one_tet(const Eigen::MatrixXd& labels, bool topological = true,
+                         const std::vector<char>& relabelled = {}) {
+  const TetMesh4 mesh = one_tet();
+  const Surface A = unit_sphere();
+  const SurfaceLocator locator(A);
+  const SliceMesh B = target_boundary(mesh, labels);
+  EXPECT_EQ(B.F.rows(), 1);
+  SeamOptions options;
+  options.texture = false;
+  options.topological = topological;
+  return split_seams(B, mesh, labels, A, locator, options, relabelled);
+}
+
 // One tet: three vertices on B (t = 1), one inside. Vertex 0 carries the north pole's label, the others
 // the south pole's, so B's only triangle straddles a topological seam.
 TEST(Seams, TriangleAcrossALabelSeamIsCutAndNoPieceSpansIt) {
-  const TetMesh4 mesh = one_tet();
   Eigen::MatrixXd labels(4, 3);
   labels << 0, 0, 1,  //
       0.05, 0, -1,    //
       0, 0.05, -1,    //
       0, 0, -1;
-  const Surface A = unit_sphere();
-  const SurfaceLocator locator(A);
-  const SliceMesh B = target_boundary(mesh, labels);
-  ASSERT_EQ(B.F.rows(), 1);
-  SeamOptions options;
-  options.texture = false;
-  const SeamResult r = split_seams(B, mesh, labels, A, locator, options);
+  const SeamResult r = split_one_tet(labels);
   EXPECT_EQ(r.seam_tets, 1);
   EXPECT_EQ(r.topological_split, 1);
   EXPECT_EQ(r.F.rows(), 3);  // a triangle and a quad
@@ -68,9 +77,28 @@ TEST(Seams, TriangleAcrossALabelSeamIsCutAndNoPieceSpansIt) {
     EXPECT_TRUE(p.isApprox(Eigen::Vector3d(0.5, 0, 0)) || p.isApprox(Eigen::Vector3d(0, 0.5, 0))) << p.transpose();
   }
   // Without seam handling the same triangle would stay whole and span the seam.
-  options.topological = false;
-  const SeamResult off = split_seams(B, mesh, labels, A, locator, options);
+  const SeamResult off = split_one_tet(labels, false);
   EXPECT_EQ(off.spans_over_threshold, 1);
+}
+
+// B's triangle has labels within the seam threshold of each other, but the tet's fourth vertex, near two of them
+// and far from the third, makes the linkage put the third alone: the triangle is cut between corners whose labels
+// agree. Where the fold repair relabelled all three corners (the fourth vertex's label is one it replaced), the
+// triangle stays whole.
+TEST(Seams, TriangleWhoseCornersTheRepairRelabelledStaysWhole) {
+  Eigen::MatrixXd labels(4, 3);
+  const double d = std::sqrt(0.5);
+  labels << 0, 0, 1,                                    // p: the pole, 1.0 from s
+      d, 0, d,                                          // q: 0.77 from p, 0.26 from s
+      Eigen::RowVector3d(0.5, 0.3, 0.81).normalized(),  // r: 0.61 from p, 0.38 from q, 0.57 from s
+      std::sqrt(0.75), 0, 0.5;                          // s: the tet's vertex on A
+  EXPECT_EQ(split_one_tet(labels).topological_split, 1);
+  EXPECT_EQ(split_one_tet(labels, true, {1, 1, 0}).topological_split, 1);
+  const SeamResult whole = split_one_tet(labels, true, {1, 1, 1});
+  EXPECT_EQ(whole.topological_split, 0);
+  EXPECT_EQ(whole.F.rows(), 1);
+  EXPECT_EQ(whole.V.rows(), 3);
+  EXPECT_THROW(split_one_tet(labels, true, {1, 1}), InvalidInput);
 }
 
 PipelineOptions small(const std::string& source, const std::string& target) {
