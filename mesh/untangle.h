@@ -63,8 +63,8 @@ struct UntangleOptions {
   /// Sweeps per round instead when a seam was healed. Each sweep moves a vertex one damped Newton step, so a healed
   /// patch (an ear laid out again inside its loop) spreads its squeeze slowly: on sphere -> bunny, 150 / 400 / 1000 /
   /// 3000 sweeps gave variance 0.28 / 0.25 / 0.20 / 0.17, p99 3.77 / 3.62 / 3.21 / 2.94, min compression 0.011 /
-  /// 0.010 / 0.022 / 0.073, for a repair of 1.4 / 1.5 / 2.0 / 4.2 s. Every repair that long took cow -> horse's (63
-  /// voxels, nothing healed) from 2.5 to 8-10 s.
+  /// 0.010 / 0.022 / 0.073, for a repair of 1.4 / 1.5 / 2.0 / 4.2 s (measured before the last seam closed, with 42
+  /// collapsed pieces). Every repair that long took cow -> horse's (63 voxels, nothing healed) from 2.5 to 8-10 s.
   int healed_smoothing_sweeps = 1000;
   /// A smoothing step counts as a move (its vertex's neighbours are visited in the next sweep) when its squared length
   /// exceeds this times the mean area of the vertex's triangles. Measured on sphere -> bunny at 40 voxels (300 sweeps,
@@ -87,9 +87,11 @@ struct UntangleOptions {
   /// disk whose boundary is a simple loop in one chart, the seam is a fan of the traced map that the ends' topology
   /// does not force (an ear born as a bubble of the morph and joined to the head, sphere -> bunny), and laying the
   /// patch out again inside its loop closes it. Around a seam the topology forces (sphere -> torus, a sphere splitting
-  /// in two) the patch is an annulus or its loop crosses itself, and nothing changes. Measured on sphere -> bunny at
-  /// the defaults (README, "Fold repair"): coverage 1.063 -> 1.010, folded 12 -> 0, collapsed 192 -> 21 (pieces of
-  /// the seam split), at the cost of the mean (1.17 -> 1.22) and the variance (0.11 -> 0.17).
+  /// in two) the patch is an annulus or its loop crosses itself, and nothing changes. With it, a layout that closes
+  /// every seam of its patch is kept though it leaves folds (the local untangling rights them), and the parts of B a
+  /// patch cuts off join it (an ear beyond the rings around its base). Measured on sphere -> bunny at the defaults
+  /// (README, "Healing seams"): coverage 1.066 -> 1.017, folded 12 -> 0, collapsed 186 -> 0, min 0.020 -> 0.048, at
+  /// the cost of the mean (1.165 -> 1.233) and the variance (0.111 -> 0.213); at 32 and 48 voxels no seam closes.
   bool heal_seams = true;
   int patch_rings = 2;
   int max_patch_rings = 8;                 ///< rings of the largest patch tried
