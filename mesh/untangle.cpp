@@ -169,6 +169,7 @@ class Untangler {
     const std::vector<SurfaceHit> hits = locator_.closest_all(labels_);
     for (Eigen::Index v = 0; v < nv; ++v) face_of_[std::size_t(v)] = hits[std::size_t(v)].face;
     scale_ = std::sqrt(surface_area(A_.V, A_.F) / surface_area(V_, F_.cast<int>()));
+    centre_ = A_.V.colwise().mean().transpose();
 
     in_region_.assign(std::size_t(nv), 0);
     std::vector<int> rebuilt;
@@ -708,7 +709,9 @@ class Untangler {
         faces.erase(std::unique(faces.begin(), faces.end()), faces.end());
         for (const int f : faces) near_seam = near_seam || (options_.heal_seams && state_[std::size_t(f)] == kSeam);
         std::vector<int> moved;
-        if (lay_out_patch(faces, moved, result)) {
+        // Where no tangent plane holds the patch's loop as a simple polygon, a chart of directions may (near a seam).
+        if (lay_out_patch(faces, moved, result) ||
+            (chart_failed_ && near_seam && options_.direction_charts && lay_out_patch(faces, moved, result, true))) {
           ++result.patches_rebuilt;
           result.seams_healed += near_seam;
           result.patch_vertices += std::int64_t(moved.size());
@@ -761,7 +764,9 @@ class Untangler {
   /// The Tutte layout of one patch (triangles `faces`, sorted) in a chart of A; false, with the labels as they
   /// were, unless the patch is a disk whose boundary is a simple loop in the chart and every triangle comes out
   /// positive there and on A. `moved` gets the inner vertices.
-  bool lay_out_patch(const std::vector<int>& faces, std::vector<int>& moved, UntangleResult& result) {
+  bool lay_out_patch(const std::vector<int>& faces, std::vector<int>& moved, UntangleResult& result,
+                     bool directions = false) {
+    chart_failed_ = false;
     // Boundary: half-edges whose twin is not in the patch; a disk has V - E + F = 1 and one boundary loop.
     std::map<std::pair<int, int>, int> half;
     for (const int f : faces)
@@ -796,10 +801,29 @@ class Untangler {
       axis += unit_normal_[std::size_t(face_of_[std::size_t(v)])];
       origin += labels_.row(v).transpose();
     }
+    if (directions) {  // the loop's mean direction from A's centre
+      axis.setZero();
+      for (const int v : loop) axis += (labels_.row(v).transpose() - centre_).normalized();
+    }
     if (!(axis.norm() > 0.0)) return false;
     axis.normalize();
     origin /= double(loop.size());
     const Eigen::Vector3d e1 = axis.unitOrthogonal(), e2 = axis.cross(e1);
+    const double reach = 2.0 * bounding_box(A_.V).diagonal().norm();
+    // The chart of directions from A's centre, for a star-shaped A: it holds almost the whole of A where a tangent
+    // plane holds less than half. A point enters it only if the ray from the centre through it meets A once, and a
+    // chart point goes back to A where its ray meets A.
+    const DirectionChart around(centre_, axis);
+    const auto to_directions = [&](int v, Eigen::Vector2d& out) {
+      const Eigen::Vector3d p = labels_.row(v).transpose();
+      return around.to(p, out) &&
+             locator_.crossings(centre_, centre_ + reach * (p - centre_).normalized(), 3, 1e-9).size() == 1;
+    };
+    const auto lift_directions = [&](const Eigen::Vector2d& x, int hint) {
+      const Eigen::Vector3d d = around.direction(x);
+      const std::vector<double> t = locator_.crossings(centre_, centre_ + reach * d, 3, 1e-9);
+      return locator_.closest_near(centre_ + (t.empty() ? 1.0 : t.front()) * reach * d, hint);
+    };
     std::vector<int> slot(std::size_t(V_.rows()), -1);
     const int n = int(vertices.size());
     std::vector<Eigen::Vector2d> x(static_cast<std::size_t>(n));
@@ -810,7 +834,10 @@ class Untangler {
       const int v = vertices[std::size_t(i)];
       slot[std::size_t(v)] = i;
       if (!fixed[std::size_t(i)]) continue;
-      if (!to_chart(v, origin, axis, e1, e2, x[std::size_t(i)])) return false;
+      if (!(directions ? to_directions(v, x[std::size_t(i)]) : to_chart(v, origin, axis, e1, e2, x[std::size_t(i)]))) {
+        chart_failed_ = true;
+        return false;
+      }
     }
     // The loop, with the patch on its left, must be a simple counter-clockwise polygon in the chart.
     const std::size_t m = loop.size();
@@ -820,7 +847,8 @@ class Untangler {
       const Eigen::Vector2d& q = x[std::size_t(slot[std::size_t(loop[(a + 1) % m])])];
       twice_area += p.x() * q.y() - p.y() * q.x();
     }
-    if (!(twice_area > 0.0)) return false;
+    chart_failed_ = !(twice_area > 0.0);
+    if (chart_failed_) return false;
     for (std::size_t a = 0; a < m; ++a)
       for (std::size_t b = a + 2; b < m; ++b) {
         if (a == 0 && b == m - 1) continue;  // neighbours along the loop
@@ -830,7 +858,10 @@ class Untangler {
         const Eigen::Vector2d& q1 = x[std::size_t(slot[std::size_t(loop[(b + 1) % m])])];
         const double d1 = area(p1 - p0, q0 - p0), d2 = area(p1 - p0, q1 - p0);
         const double d3 = area(q1 - q0, p0 - q0), d4 = area(q1 - q0, p1 - q0);
-        if (((d1 > 0) != (d2 > 0)) && ((d3 > 0) != (d4 > 0))) return false;
+        if (((d1 > 0) != (d2 > 0)) && ((d3 > 0) != (d4 > 0))) {
+          chart_failed_ = true;
+          return false;
+        }
       }
 
     // Mean value weights of B's own triangles: with a convex boundary the layout is one to one (Tutte).
@@ -874,7 +905,8 @@ class Untangler {
       if (fixed[std::size_t(i)]) continue;
       const int v = vertices[std::size_t(i)];
       before.emplace_back(labels_.row(v).transpose(), face_of_[std::size_t(v)]);
-      const SurfaceHit hit = lift(origin, e1, e2, x[std::size_t(i)], face_of_[std::size_t(v)]);
+      const SurfaceHit hit = directions ? lift_directions(x[std::size_t(i)], face_of_[std::size_t(v)])
+                                        : lift(origin, e1, e2, x[std::size_t(i)], face_of_[std::size_t(v)]);
       labels_.row(v) = hit.point.transpose();
       face_of_[std::size_t(v)] = hit.face;
       moved.push_back(v);
@@ -931,6 +963,8 @@ class Untangler {
   const UntangleOptions& options_;
   const VertexFaces vf_;
   std::vector<char> state_, wall_, moved_, in_region_;
+  bool chart_failed_ = false;  // lay_out_patch(): its last failure was the chart's (a point or the loop)
+  Eigen::Vector3d centre_ = Eigen::Vector3d::Zero();  // A's vertices' mean: the centre of the direction charts
   std::vector<int> part_of_;  // enclose(): the part of B outside a patch each vertex was found in, -1 between calls
   std::vector<Eigen::Vector3d> unit_normal_;  // A's outward unit face normals (every chart reads them)
   struct Shape {
@@ -944,6 +978,22 @@ class Untangler {
 };
 
 }  // namespace
+
+DirectionChart::DirectionChart(const Eigen::Vector3d& c, const Eigen::Vector3d& a)
+    : centre(c), axis(a.normalized()), e1(axis.unitOrthogonal()), e2(axis.cross(e1)) {}
+
+bool DirectionChart::to(const Eigen::Vector3d& p, Eigen::Vector2d& x) const {
+  const Eigen::Vector3d d = (p - centre).normalized();
+  const double below = 1.0 + d.dot(axis);  // 0 at the pole, -axis
+  if (!(below > 1e-3)) return false;
+  x = Eigen::Vector2d(d.dot(e1), d.dot(e2)) / below;
+  return true;
+}
+
+Eigen::Vector3d DirectionChart::direction(const Eigen::Vector2d& x) const {
+  const double r2 = x.squaredNorm();
+  return (2.0 * (x.x() * e1 + x.y() * e2) + (1.0 - r2) * axis) / (1.0 + r2);
+}
 
 UntangleResult untangle_labels(const Surface& A, const SurfaceLocator& locator, const Eigen::MatrixXd& V,
                                const TriIndices& F, Eigen::MatrixXd& labels, const UntangleOptions& options) {

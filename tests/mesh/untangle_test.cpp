@@ -5,6 +5,7 @@
 #include <tbb/global_control.h>
 
 #include <Eigen/Geometry>
+#include <array>
 #include <cmath>
 #include <limits>
 #include <vector>
@@ -320,6 +321,33 @@ TEST(Untangle, HealsASeamThatTheTopologyDoesNotForce) {
   const StretchResult kept_stretch = measure_stretch(A, A.V, A.F, kept);
   EXPECT_GT(kept_stretch.coverage, 1.02);
   EXPECT_GT(kept_stretch.folded + kept_stretch.collapsed, 0);  // long seam triangles facing against A
+}
+
+TEST(Untangle, DirectionChartHoldsAlmostEveryDirectionOneToOne) {
+  const Eigen::Vector3d centre(0.5, -1.0, 2.0), axis = Eigen::Vector3d(1.0, 2.0, -0.5).normalized();
+  const DirectionChart chart(centre, axis);
+  Eigen::Vector2d x;
+  ASSERT_TRUE(chart.to(centre + 3.0 * axis, x));
+  EXPECT_LT(x.norm(), 1e-12);                      // the axis is the chart's origin
+  EXPECT_FALSE(chart.to(centre - 2.0 * axis, x));  // the pole has no chart point
+  // Every other direction, even 170 degrees from the axis, goes there and back.
+  const Surface sphere = fine_sphere();
+  int entered = 0;
+  for (Eigen::Index i = 0; i < sphere.V.rows(); ++i) {
+    const Eigen::Vector3d d = sphere.V.row(i).transpose().normalized();
+    if (d.dot(axis) < -0.99) continue;
+    ASSERT_TRUE(chart.to(centre + 2.5 * d, x)) << i;
+    EXPECT_LT((chart.direction(x) - d).norm(), 1e-12) << i;
+    ++entered;
+  }
+  EXPECT_GT(entered, int(sphere.V.rows()) - 10);
+  // It keeps orientation: a triangle counter-clockwise seen from outside, around the axis, is counter-clockwise there.
+  const Eigen::Vector3d u = chart.e1, w = chart.e2;
+  std::array<Eigen::Vector2d, 3> t;
+  const std::array<Eigen::Vector3d, 3> corners = {axis + 0.3 * u, axis + 0.3 * w, axis - 0.3 * u - 0.3 * w};
+  for (int k = 0; k < 3; ++k) ASSERT_TRUE(chart.to(centre + corners[std::size_t(k)], t[std::size_t(k)]));
+  const Eigen::Vector2d a = t[1] - t[0], b = t[2] - t[0];
+  EXPECT_GT(a.x() * b.y() - a.y() * b.x(), 0.0);
 }
 
 TEST(Untangle, LeavesAGoodMapAlone) {
