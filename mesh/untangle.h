@@ -91,7 +91,8 @@ struct UntangleOptions {
   /// every seam of its patch is kept though it leaves folds (the local untangling rights them), and the parts of B a
   /// patch cuts off join it (an ear beyond the rings around its base). Measured on sphere -> bunny at the defaults
   /// (README, "Healing seams"): coverage 1.066 -> 1.017, folded 12 -> 0, collapsed 186 -> 0, min 0.020 -> 0.048, at
-  /// the cost of the mean (1.165 -> 1.233) and the variance (0.111 -> 0.213); at 32 and 48 voxels no seam closes.
+  /// the cost of the mean (1.165 -> 1.233) and the variance (0.111 -> 0.213); at 32 and 48 voxels the seams close
+  /// only in charts of directions (direction_charts).
   bool heal_seams = true;
   int patch_rings = 2;
   int max_patch_rings = 8;                 ///< rings of the largest patch tried
