@@ -198,6 +198,12 @@ void add_pipeline_options(CLI::App& cmd, PipelineOptions& o) {
       ->check(CLI::IsMember({"on", "off"}))
       ->default_str("on");
   cmd.add_option_function<std::string>(
+         "--direction-charts", [&o](const std::string& value) { o.untangle.direction_charts = value == "on"; },
+         "With --heal-seams on, try a seam's patch that no tangent plane of the source holds again in a "
+         "stereographic chart of the directions from the source's centre (for a star-shaped source; on or off)")
+      ->check(CLI::IsMember({"on", "off"}))
+      ->default_str("off");
+  cmd.add_option_function<std::string>(
          "--stalled-fill", [&o](const std::string& value) { o.stalled_fill = value; },
          "Label the target's vertices whose characteristic stalls (parts born during the morph) from the traced "
          "vertices around them, by a mean-value convex combination, instead of the point of the source nearest to "

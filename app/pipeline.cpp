@@ -967,6 +967,7 @@ PipelineResult run_pipeline(const PipelineOptions& options) {
                        {"seam_threshold", options.seams.label_threshold},
                        {"fold_repair", options.untangle.enabled},
                        {"heal_seams", options.untangle.heal_seams},
+                       {"direction_charts", options.untangle.direction_charts},
                        {"stalled_fill", options.stalled_fill},
                        {"slices", options.slices},
                        {"threads", options.threads},

@@ -92,7 +92,7 @@ struct UntangleOptions {
   /// patch cuts off join it (an ear beyond the rings around its base). Measured on sphere -> bunny at the defaults
   /// (README, "Healing seams"): coverage 1.066 -> 1.017, folded 12 -> 0, collapsed 186 -> 0, min 0.020 -> 0.048, at
   /// the cost of the mean (1.165 -> 1.233) and the variance (0.111 -> 0.213); at 32 and 48 voxels the seams close
-  /// only in charts of directions (direction_charts).
+  /// only in charts of directions (direction_charts, off by default).
   bool heal_seams = true;
   int patch_rings = 2;
   int max_patch_rings = 8;                 ///< rings of the largest patch tried
@@ -106,10 +106,11 @@ struct UntangleOptions {
   /// A patch near a seam whose loop no tangent plane holds as a simple polygon (a point's normal turns too far from
   /// the axis, or the loop crosses itself or turns the wrong way there) is tried again in a stereographic chart of
   /// the directions from A's centre, which holds almost all of A where A is star-shaped (every point of the patch must
-  /// be the only crossing of A on its ray from the centre). Measured on sphere -> bunny (README, "Healing seams"): at
-  /// 32 voxels 12 folded, 174 collapsed, coverage 1.049 -> 0, 0, 1.005; at 48 voxels 84, 231, 1.143 -> 2, 0, 1.005;
-  /// the defaults (40 voxels) unchanged.
-  bool direction_charts = true;
+  /// be the only crossing of A on its ray from the centre). Off by default: on sphere -> bunny (README, "Healing
+  /// seams") it took 32 voxels from 12 folded, 174 collapsed, coverage 1.049 to 0, 0, 1.005 and 48 voxels from 84,
+  /// 231, 1.143 to 2, 0, 1.005, the defaults (40 voxels) unchanged, but Table I's tuned variational row went from max
+  /// stretch 10.1 to 2.4e8 (one triangle the repair left stretched) and its 10-sweep row from 7.4e8 to 1.7e8.
+  bool direction_charts = false;
   std::int64_t max_seam_patch_vertices = 4000;
   double max_patch_bad_fraction = 0.25;  ///< a layout may leave at most this fraction of the patch's bad triangles
   double min_patch_area_ratio = 0.01;    ///< nor any triangle below this fraction of its (scaled) area on B
