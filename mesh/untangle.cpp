@@ -170,6 +170,7 @@ class Untangler {
     for (Eigen::Index v = 0; v < nv; ++v) face_of_[std::size_t(v)] = hits[std::size_t(v)].face;
     scale_ = std::sqrt(surface_area(A_.V, A_.F) / surface_area(V_, F_.cast<int>()));
     centre_ = A_.V.colwise().mean().transpose();
+    reach_ = 2.0 * bounding_box(A_.V).diagonal().norm();
 
     in_region_.assign(std::size_t(nv), 0);
     std::vector<int> rebuilt;
@@ -642,9 +643,9 @@ class Untangler {
     const Eigen::Index nv = V_.rows(), nf = F_.rows();
     std::vector<char> tried(std::size_t(nf), 0), seen(std::size_t(nv), 0);
     std::vector<int> rebuilt;
+    // Seam triangles seed clusters too (UntangleOptions::heal_seams).
+    const auto seed = [&](char state) { return bad(state) || (options_.heal_seams && state == kSeam); };
     for (Eigen::Index f0 = 0; f0 < nf; ++f0) {
-      // Seam triangles seed clusters too (UntangleOptions::heal_seams).
-      auto seed = [&](char state) { return bad(state) || (options_.heal_seams && state == kSeam); };
       if (!seed(state_[std::size_t(f0)]) || tried[std::size_t(f0)]) continue;
       bool seam_cluster = false;
       // The cluster: bad triangles joined through shared vertices.
@@ -809,7 +810,6 @@ class Untangler {
     axis.normalize();
     origin /= double(loop.size());
     const Eigen::Vector3d e1 = axis.unitOrthogonal(), e2 = axis.cross(e1);
-    const double reach = 2.0 * bounding_box(A_.V).diagonal().norm();
     // The chart of directions from A's centre, for a star-shaped A: it holds almost the whole of A where a tangent
     // plane holds less than half. A point enters it only if the ray from the centre through it meets A once, and a
     // chart point goes back to A where its ray meets A.
@@ -817,12 +817,12 @@ class Untangler {
     const auto to_directions = [&](int v, Eigen::Vector2d& out) {
       const Eigen::Vector3d p = labels_.row(v).transpose();
       return around.to(p, out) &&
-             locator_.crossings(centre_, centre_ + reach * (p - centre_).normalized(), 3, 1e-9).size() == 1;
+             locator_.crossings(centre_, centre_ + reach_ * (p - centre_).normalized(), 3, 1e-9).size() == 1;
     };
     const auto lift_directions = [&](const Eigen::Vector2d& x, int hint) {
       const Eigen::Vector3d d = around.direction(x);
-      const std::vector<double> t = locator_.crossings(centre_, centre_ + reach * d, 3, 1e-9);
-      return locator_.closest_near(centre_ + (t.empty() ? 1.0 : t.front()) * reach * d, hint);
+      const std::vector<double> t = locator_.crossings(centre_, centre_ + reach_ * d, 3, 1e-9);
+      return locator_.closest_near(centre_ + (t.empty() ? 1.0 : t.front()) * reach_ * d, hint);
     };
     std::vector<int> slot(std::size_t(V_.rows()), -1);
     const int n = int(vertices.size());
@@ -895,8 +895,11 @@ class Untangler {
     for (int i = 0; i < n; ++i)
       if (!fixed[std::size_t(i)]) x[std::size_t(i)] = solution.row(unknown[std::size_t(i)]).transpose();
     if (options_.untangle_layouts && untangle_layout(faces, slot, fixed, x)) ++result.layouts_untangled;
-    std::int64_t bad_before = 0;
-    for (const int f : faces) bad_before += state_[std::size_t(f)] != kGood;
+    std::int64_t bad_before = 0, seams_before = 0;
+    for (const int f : faces) {
+      bad_before += state_[std::size_t(f)] != kGood;
+      seams_before += state_[std::size_t(f)] == kSeam;
+    }
 
     // Lift the inner vertices to A; keep the layout only when no triangle of the patch is bad there.
     std::vector<std::pair<Eigen::Vector3d, int>> before;
@@ -917,10 +920,11 @@ class Untangler {
     // area on B (scaled to A's area): measured on cow -> horse, layouts without that guard raised the L2 p99 from
     // 331 to 1.7e4.
     std::vector<char> states(faces.size());
-    std::int64_t bad_after = 0;
+    std::int64_t bad_after = 0, seams_after = 0;
     for (std::size_t a = 0; a < faces.size(); ++a) {
       states[a] = spans_seam(faces[a]) ? char(kSeam) : classify(faces[a]);
       bad_after += states[a] != kGood;
+      seams_after += states[a] == kSeam;
     }
     double smallest = std::numeric_limits<double>::infinity();
     for (const int f : faces) {
@@ -932,11 +936,6 @@ class Untangler {
     // A layout that closes every seam of its patch is kept though it leaves folds (the local untangling that follows
     // rights them): on sphere -> bunny the last seam's patch went from 2 seam and 7 folded triangles to none and 8
     // (4 rings), and the map from 42 collapsed pieces of the seam split to none, with no fold left.
-    std::int64_t seams_before = 0, seams_after = 0;
-    for (std::size_t a = 0; a < faces.size(); ++a) {
-      seams_before += state_[std::size_t(faces[a])] == kSeam;
-      seams_after += states[a] == kSeam;
-    }
     const bool closes_seams = options_.heal_seams && seams_before > 0 && seams_after == 0;
     if ((!closes_seams && double(bad_after) > options_.max_patch_bad_fraction * double(bad_before)) ||
         smallest < options_.min_patch_area_ratio) {
@@ -965,6 +964,7 @@ class Untangler {
   std::vector<char> state_, wall_, moved_, in_region_;
   bool chart_failed_ = false;  // lay_out_patch(): its last failure was the chart's (a point or the loop)
   Eigen::Vector3d centre_ = Eigen::Vector3d::Zero();  // A's vertices' mean: the centre of the direction charts
+  double reach_ = 0.0;        // twice A's bounding-box diagonal: rays of the direction charts end beyond A
   std::vector<int> part_of_;  // enclose(): the part of B outside a patch each vertex was found in, -1 between calls
   std::vector<Eigen::Vector3d> unit_normal_;  // A's outward unit face normals (every chart reads them)
   struct Shape {
