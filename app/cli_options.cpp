@@ -203,6 +203,12 @@ void add_pipeline_options(CLI::App& cmd, PipelineOptions& o) {
          "stereographic chart of the directions from the source's centre (for a star-shaped source; on or off)")
       ->check(CLI::IsMember({"on", "off"}))
       ->default_str("off");
+  cmd.add_option("--compression-seed", o.untangle.compression_seed,
+                 "With --fold-repair on, relieve the parts of the map around triangles compressed below this sigma2 "
+                 "(Newton steps of the symmetric Dirichlet smoothing, then each vertex moved to where its worst "
+                 "triangle is least compressed; a part is kept only where its figures improve; 0: off)")
+      ->check(CLI::NonNegativeNumber)
+      ->capture_default_str();
   cmd.add_option_function<std::string>(
          "--stalled-fill", [&o](const std::string& value) { o.stalled_fill = value; },
          "Label the target's vertices whose characteristic stalls (parts born during the morph) from the traced "

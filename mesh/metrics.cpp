@@ -59,18 +59,9 @@ TriangleMaps triangle_maps(const Eigen::MatrixXd& V, const TriIndices& F, const 
       area_p(f) = 0.5 * normal_p[std::size_t(f)].norm();
       area_b(f) = 0.5 * Eq.col(0).cross(Eq.col(1)).norm();
       centroid.row(f) = ((p0 + p1 + p2) / 3.0).transpose();
-      // Singular values of the map p -> q: square roots of the eigenvalues of (Ep^T Ep)^-1 Eq^T Eq,
-      // i.e. of the generalised symmetric problem Eq^T Eq x = lambda Ep^T Ep x.
-      const Eigen::Matrix2d P = Ep.transpose() * Ep, Q = Eq.transpose() * Eq;
-      const double detP = P.determinant();
-      if (!(detP > 0.0)) {
-        sigma1(f) = sigma2(f) = std::numeric_limits<double>::quiet_NaN();
-        continue;
-      }
-      const Eigen::GeneralizedSelfAdjointEigenSolver<Eigen::Matrix2d> eig(Q, P, Eigen::EigenvaluesOnly);
-      const Eigen::Vector2d lambda = eig.eigenvalues().cwiseMax(0.0);
-      sigma1(f) = std::sqrt(lambda(1)) / normalise;
-      sigma2(f) = std::sqrt(lambda(0)) / normalise;
+      const Eigen::Vector2d sigma = triangle_singular_values(Ep, Eq);
+      sigma1(f) = sigma(0) / normalise;
+      sigma2(f) = sigma(1) / normalise;
     }
   });
 
@@ -86,6 +77,16 @@ bool degenerate(const TriangleMaps& maps, Eigen::Index f, double mean_area_b, co
 }
 
 }  // namespace
+
+Eigen::Vector2d triangle_singular_values(const Eigen::Matrix<double, 3, 2>& Ep, const Eigen::Matrix<double, 3, 2>& Eq) {
+  // Square roots of the eigenvalues of (Ep^T Ep)^-1 Eq^T Eq, i.e. of the generalised symmetric problem
+  // Eq^T Eq x = lambda Ep^T Ep x.
+  const Eigen::Matrix2d P = Ep.transpose() * Ep, Q = Eq.transpose() * Eq;
+  if (!(P.determinant() > 0.0)) return Eigen::Vector2d::Constant(std::numeric_limits<double>::quiet_NaN());
+  const Eigen::GeneralizedSelfAdjointEigenSolver<Eigen::Matrix2d> eig(Q, P, Eigen::EigenvaluesOnly);
+  const Eigen::Vector2d lambda = eig.eigenvalues().cwiseMax(0.0);
+  return Eigen::Vector2d(std::sqrt(lambda(1)), std::sqrt(lambda(0)));
+}
 
 StretchResult measure_stretch(const Surface& A, const Eigen::MatrixXd& V, const TriIndices& F,
                               const Eigen::MatrixXd& preimages, const StretchOptions& options) {
@@ -161,21 +162,31 @@ StretchResult measure_stretch(const Surface& A, const Eigen::MatrixXd& V, const 
   return r;
 }
 
-Eigen::VectorXd stretch_per_triangle(const Surface& A, const Eigen::MatrixXd& V, const TriIndices& F,
-                                     const Eigen::MatrixXd& preimages, const StretchOptions& options) {
+Eigen::MatrixX2d singular_values_per_triangle(const Surface& A, const Eigen::MatrixXd& V, const TriIndices& F,
+                                              const Eigen::MatrixXd& preimages, const StretchOptions& options) {
   check_stretch_inputs(V, F, preimages);
   const double area_a = surface_area(A.V, A.F), area_b = surface_area(V, F.cast<int>());
-  if (!(area_a > 0.0) || !(area_b > 0.0)) throw InvalidInput("stretch_per_triangle: a surface has zero area");
+  if (!(area_a > 0.0) || !(area_b > 0.0)) throw InvalidInput("singular_values_per_triangle: a surface has zero area");
   const TriangleMaps maps = triangle_maps(V, F, preimages, std::sqrt(area_b / area_a));
   const Eigen::Index n = F.rows();
   const double mean_preimage_area = maps.area_p.sum() / std::max<Eigen::Index>(1, n);
   const double mean_area_b = maps.area_b.sum() / std::max<Eigen::Index>(1, n);
-  Eigen::VectorXd l2(n);
+  Eigen::MatrixX2d sigma(n, 2);
   for (Eigen::Index f = 0; f < n; ++f) {
-    l2(f) = collapsed(maps, f, mean_preimage_area, options) || degenerate(maps, f, mean_area_b, options)
-                ? std::numeric_limits<double>::quiet_NaN()
-                : std::sqrt(0.5 * (maps.sigma1(f) * maps.sigma1(f) + maps.sigma2(f) * maps.sigma2(f)));
+    if (collapsed(maps, f, mean_preimage_area, options) || degenerate(maps, f, mean_area_b, options))
+      sigma.row(f).setConstant(std::numeric_limits<double>::quiet_NaN());
+    else
+      sigma.row(f) << maps.sigma1(f), maps.sigma2(f);
   }
+  return sigma;
+}
+
+Eigen::VectorXd stretch_per_triangle(const Surface& A, const Eigen::MatrixXd& V, const TriIndices& F,
+                                     const Eigen::MatrixXd& preimages, const StretchOptions& options) {
+  const Eigen::MatrixX2d sigma = singular_values_per_triangle(A, V, F, preimages, options);
+  Eigen::VectorXd l2(sigma.rows());
+  for (Eigen::Index f = 0; f < sigma.rows(); ++f)  // NaN rows stay NaN
+    l2(f) = std::sqrt(0.5 * (sigma(f, 0) * sigma(f, 0) + sigma(f, 1) * sigma(f, 1)));
   return l2;
 }
 

@@ -45,11 +45,20 @@ struct StretchResult {
   double seconds = 0.0;
 };
 
+/// Singular values (sigma1 >= sigma2), not normalised, of the affine map from the triangle with edge matrix Ep (3 by
+/// 2: p1 - p0, p2 - p0) to the one with Eq; NaN where the first is flat. The one definition every figure uses.
+Eigen::Vector2d triangle_singular_values(const Eigen::Matrix<double, 3, 2>& Ep, const Eigen::Matrix<double, 3, 2>& Eq);
+
 /// Stretch of the map that sends each vertex of B (V #V by 3, F #F by 3) to its preimage on A
 /// (preimages #V by 3, points of A's surface, in A's coordinates). A's outward face normals at the
 /// preimage centroids decide folds.
 StretchResult measure_stretch(const Surface& A, const Eigen::MatrixXd& V, const TriIndices& F,
                               const Eigen::MatrixXd& preimages, const StretchOptions& options = {});
+
+/// Per-triangle singular values (sigma1 >= sigma2, columns 0 and 1; #F by 2) of the same map, normalised like
+/// measure_stretch; NaN rows for the triangles measure_stretch counts as collapsed or degenerate.
+Eigen::MatrixX2d singular_values_per_triangle(const Surface& A, const Eigen::MatrixXd& V, const TriIndices& F,
+                                              const Eigen::MatrixXd& preimages, const StretchOptions& options = {});
 
 /// Per-triangle L2 stretch sqrt((s1^2 + s2^2) / 2) of the same map, normalised like measure_stretch (#F values);
 /// NaN for the triangles measure_stretch counts as collapsed or degenerate. For stretch heat maps.

@@ -12,6 +12,7 @@
 #include <algorithm>
 #include <chrono>
 #include <cmath>
+#include <cstdlib>
 #include <limits>
 #include <map>
 #include <numeric>
@@ -102,8 +103,10 @@ double max_min_area(const Ring& ring, Eigen::Vector2d& best) {
 /// Symmetric Dirichlet energy of the active triangles' maps from B (scaled) to the chart with the vertex at x,
 /// area(B)-weighted: |J|^2 + |J^-1|^2, which grows without bound as a triangle flattens (infinite once one is not
 /// positive). With `gradient`, also its gradient and a bound of its curvature along any direction, for the step.
-double dirichlet(const Ring& ring, const Eigen::Vector2d& x, Eigen::Vector2d* gradient, double* curvature) {
+double dirichlet(const Ring& ring, const Eigen::Vector2d& x, Eigen::Vector2d* gradient, double* curvature,
+                 Eigen::Matrix2d* hessian = nullptr) {
   double total = 0.0;
+  if (hessian) hessian->setZero();
   if (gradient) gradient->setZero();
   if (curvature) *curvature = 0.0;
   for (std::size_t k = 0; k < ring.a.size(); ++k) {
@@ -125,6 +128,12 @@ double dirichlet(const Ring& ring, const Eigen::Vector2d& x, Eigen::Vector2d* gr
       *gradient += w * (-2.0 * (J * m) * (1.0 + ratio) - 2.0 * N * ratio / d * grad_d);
       if (curvature)
         *curvature += w * (2.0 * m.squaredNorm() * (1.0 + ratio) + 6.0 * N * ratio / (d * d) * grad_d.squaredNorm());
+      if (hessian) {
+        const Eigen::Vector2d grad_n = -2.0 * (J * m);
+        *hessian += w * (2.0 * m.squaredNorm() * (1.0 + ratio) * Eigen::Matrix2d::Identity() -
+                         2.0 * ratio / d * (grad_n * grad_d.transpose() + grad_d * grad_n.transpose()) +
+                         6.0 * N * ratio / (d * d) * grad_d * grad_d.transpose());
+      }
     }
   }
   return total;
@@ -138,7 +147,7 @@ class Untangler {
 
   UntangleResult run() {
     UntangleResult result;
-    const Eigen::Index nv = V_.rows(), nf = F_.rows();
+    const Eigen::Index nf = F_.rows();
     classify_all();
     auto count = [&](char which) { return std::int64_t(std::count(state_.begin(), state_.end(), which)); };
     result.folded_before = count(kFolded);
@@ -149,30 +158,18 @@ class Untangler {
     const std::int64_t seams_to_heal = options_.heal_seams && options_.rebuild_patches ? result.seam_triangles : 0;
     if (!options_.enabled ||
         result.folded_before + result.collapsed_before + result.stretched_before + seams_to_heal == 0) {
+      if (options_.enabled && options_.compression_seed > 0.0) {
+        // Only compression to relieve, maybe: relieve_compression() needs what the repair sets up.
+        prepare();
+        relieve_compression(result);
+        result.vertices_moved = std::int64_t(std::count(moved_.begin(), moved_.end(), char(1)));
+      }
       result.folded_after = result.folded_before;
       result.collapsed_after = result.collapsed_before;
       result.seam_triangles_after = result.seam_triangles;
       return result;
     }
-    // Vertices of seam triangles stay where they are: the seam split reads their labels on either side.
-    wall_.assign(std::size_t(nv), 0);
-    for (Eigen::Index f = 0; f < nf; ++f)
-      if (state_[std::size_t(f)] == kSeam)
-        for (int k = 0; k < 3; ++k) wall_[std::size_t(F_(f, k))] = 1;
-    moved_.assign(std::size_t(nv), 0);
-    face_of_.resize(std::size_t(nv));
-    shapes_.resize(vf_.faces.size());
-    shape_state_.assign(std::size_t(nv), 0);
-    unit_normal_.resize(std::size_t(A_.F.rows()));
-    tbb::parallel_for(Eigen::Index(0), A_.F.rows(),
-                      [&](Eigen::Index f) { unit_normal_[std::size_t(f)] = face_normal(int(f)).normalized(); });
-    const std::vector<SurfaceHit> hits = locator_.closest_all(labels_);
-    for (Eigen::Index v = 0; v < nv; ++v) face_of_[std::size_t(v)] = hits[std::size_t(v)].face;
-    scale_ = std::sqrt(surface_area(A_.V, A_.F) / surface_area(V_, F_.cast<int>()));
-    centre_ = A_.V.colwise().mean().transpose();
-    reach_ = 2.0 * bounding_box(A_.V).diagonal().norm();
-
-    in_region_.assign(std::size_t(nv), 0);
+    prepare();
     std::vector<int> rebuilt;
     if (options_.rebuild_patches) rebuilt = rebuild_patches(result);
 
@@ -237,8 +234,9 @@ class Untangler {
           frontier_.push_back(v);
         }
       grow(options_.smoothing_rings);
-      smooth(result);
+      smooth(result, result.seams_healed > 0 ? options_.healed_smoothing_sweeps : options_.smoothing_sweeps);
     }
+    relieve_compression(result);
     result.region_vertices = std::int64_t(region_.size());
     reclassify_region();
     result.stretched_after = std::int64_t(stretched_faces().size());
@@ -250,14 +248,37 @@ class Untangler {
   }
 
  private:
+  /// What the untangling, the smoothing and the relief read: the walls (vertices of seam triangles), each label's
+  /// face, B's shapes and A's unit normals, the area scale, A's centre and reach.
+  void prepare() {
+    const Eigen::Index nv = V_.rows(), nf = F_.rows();
+    // Vertices of seam triangles stay where they are: the seam split reads their labels on either side.
+    wall_.assign(std::size_t(nv), 0);
+    for (Eigen::Index f = 0; f < nf; ++f)
+      if (state_[std::size_t(f)] == kSeam)
+        for (int k = 0; k < 3; ++k) wall_[std::size_t(F_(f, k))] = 1;
+    moved_.assign(std::size_t(nv), 0);
+    face_of_.resize(std::size_t(nv));
+    shapes_.resize(vf_.faces.size());
+    shape_state_.assign(std::size_t(nv), 0);
+    unit_normal_.resize(std::size_t(A_.F.rows()));
+    tbb::parallel_for(Eigen::Index(0), A_.F.rows(),
+                      [&](Eigen::Index f) { unit_normal_[std::size_t(f)] = face_normal(int(f)).normalized(); });
+    const std::vector<SurfaceHit> hits = locator_.closest_all(labels_);
+    for (Eigen::Index v = 0; v < nv; ++v) face_of_[std::size_t(v)] = hits[std::size_t(v)].face;
+    scale_ = std::sqrt(surface_area(A_.V, A_.F) / surface_area(V_, F_.cast<int>()));
+    centre_ = A_.V.colwise().mean().transpose();
+    reach_ = 2.0 * bounding_box(A_.V).diagonal().norm();
+    in_region_.assign(std::size_t(nv), 0);
+  }
+
   /// Smoothing: symmetric Dirichlet descent, vertex by vertex, of the triangles positive in each chart; no step
   /// that keeps them positive folds one, and the squeezed patches the untangling righted spread out.
   /// Each sweep visits only the vertices next to one that moved in the sweep before: the patches far from the
   /// squeezed ones settle within a few sweeps, and those take many.
-  void smooth(UntangleResult& result) {
+  void smooth(UntangleResult& result, int sweeps) {
     const auto classes = colour_classes();
     std::vector<char> active(std::size_t(V_.rows()), 1), next(std::size_t(V_.rows()), 0);
-    const int sweeps = result.seams_healed > 0 ? options_.healed_smoothing_sweeps : options_.smoothing_sweeps;
     for (int sweep = 0; sweep < sweeps; ++sweep) {
       const std::int64_t moves =
           run_sweep(classes, active, &next, [&](int v, Ring& ring) { return smooth_vertex(v, ring); });
@@ -517,9 +538,21 @@ class Untangler {
     }
     Eigen::Vector2d gradient;
     double curvature = 0.0;
-    const double now = dirichlet(ring, Eigen::Vector2d::Zero(), &gradient, &curvature);
+    Eigen::Matrix2d hessian;
+    const double now = dirichlet(ring, Eigen::Vector2d::Zero(), &gradient, &curvature, newton_ ? &hessian : nullptr);
     if (!std::isfinite(now) || !(curvature > 0.0)) return false;
     Eigen::Vector2d step = -gradient / curvature;
+    // Newton's step where the relief asks for it (relieve_compression): the curvature bound is that of the stiffest
+    // direction, and a fan squeezed in one direction barely moves under it. Only where the Hessian is positive
+    // definite; the line search below keeps the energy falling either way.
+    if (newton_) {
+      const Eigen::SelfAdjointEigenSolver<Eigen::Matrix2d> eigen(hessian);
+      if (eigen.eigenvalues()(0) > 0.0) {
+        const Eigen::Vector2d newton = -eigen.eigenvectors() * (eigen.eigenvalues().cwiseInverse().asDiagonal() *
+                                                                (eigen.eigenvectors().transpose() * gradient));
+        if (newton.allFinite()) step = newton;
+      }
+    }
     for (int halving = 0; halving < 20; ++halving, step *= 0.5) {
       if (!(dirichlet(ring, step, nullptr, nullptr) < now - 1e-4 * gradient.dot(-step))) continue;
       // A triangle left out of the energy (not positive) must not become a sliver: positive but far below its
@@ -639,6 +672,316 @@ class Untangler {
   /// Lays out again, in one chart of A, each cluster of bad triangles with rings around it (see
   /// UntangleOptions::rebuild_patches), cluster by cluster in order of their first triangle. Returns the inner
   /// vertices of the rebuilt patches.
+  /// The cluster of triangles `flagged` that holds f0, joined through shared vertices: its vertices, in the order
+  /// found. `tried` (per triangle) marks the cluster's triangles; `seen` (per vertex) is all zero before and after.
+  /// visit(f) is called for each of its triangles.
+  template <class Flagged, class Visit>
+  std::vector<int> cluster_of(int f0, Flagged&& flagged, std::vector<char>& tried, std::vector<char>& seen,
+                              Visit&& visit) const {
+    std::vector<int> vertices, stack{f0};
+    tried[std::size_t(f0)] = 1;
+    while (!stack.empty()) {
+      const int f = stack.back();
+      stack.pop_back();
+      visit(f);
+      for (int k = 0; k < 3; ++k) {
+        const int v = F_(f, k);
+        if (seen[std::size_t(v)]) continue;
+        seen[std::size_t(v)] = 1;
+        vertices.push_back(v);
+        for (int j = vf_.begin(v); j < vf_.end(v); ++j) {
+          const int g = vf_.face(j);
+          if (flagged(g) && !tried[std::size_t(g)]) {
+            tried[std::size_t(g)] = 1;
+            stack.push_back(g);
+          }
+        }
+      }
+    }
+    for (const int v : vertices) seen[std::size_t(v)] = 0;
+    return vertices;
+  }
+
+  /// Adds the ring of B's vertices around `frontier` to `inside` (flagged in `member`); the ring becomes the frontier.
+  void add_ring(std::vector<int>& frontier, std::vector<char>& member, std::vector<int>& inside) const {
+    std::vector<int> next;
+    for (const int v : frontier)
+      for (int j = vf_.begin(v); j < vf_.end(v); ++j)
+        for (int k = 0; k < 3; ++k) {
+          const int u = F_(vf_.face(j), k);
+          if (member[std::size_t(u)]) continue;
+          member[std::size_t(u)] = 1;
+          next.push_back(u);
+        }
+    inside.insert(inside.end(), next.begin(), next.end());
+    frontier = std::move(next);
+  }
+
+  /// Whether a patch of this many rings is tried: at patch_rings, then at each doubling (2, 4, 8 rings by default).
+  bool tried_at(int rings) const {
+    const int doublings = rings / options_.patch_rings;
+    return rings >= options_.patch_rings && rings % options_.patch_rings == 0 && (doublings & (doublings - 1)) == 0;
+  }
+
+  /// The triangles with every corner in the patch (`inside`, flagged in `member`), sorted.
+  std::vector<int> faces_within(const std::vector<int>& inside, const std::vector<char>& member) const {
+    std::vector<int> faces;
+    for (const int v : inside)
+      for (int j = vf_.begin(v); j < vf_.end(v); ++j) {
+        const int f = vf_.face(j);
+        if (member[std::size_t(F_(f, 0))] && member[std::size_t(F_(f, 1))] && member[std::size_t(F_(f, 2))])
+          faces.push_back(f);
+      }
+    std::sort(faces.begin(), faces.end());
+    faces.erase(std::unique(faces.begin(), faces.end()), faces.end());
+    return faces;
+  }
+
+  /// Normalised singular values (DESIGN.md) of triangle f's map from its labels on A to B: (sigma1, sigma2), NaN
+  /// where its labels are flat.
+  Eigen::Vector2d singular_values(int f) const {
+    Eigen::Matrix<double, 3, 2> Ep, Eq;
+    for (int k = 1; k < 3; ++k) {
+      Ep.col(k - 1) = (labels_.row(F_(f, k)) - labels_.row(F_(f, 0))).transpose();
+      Eq.col(k - 1) = (V_.row(F_(f, k)) - V_.row(F_(f, 0))).transpose();
+    }
+    return scale_ * triangle_singular_values(Ep, Eq);
+  }
+
+  /// DESIGN.md's figures over some triangles (those with flat labels left out): the smallest sigma2, the largest
+  /// sigma1 and the B-area-weighted mean of L2.
+  struct Figures {
+    double smallest = std::numeric_limits<double>::infinity(), largest = 0.0, mean_l2 = 0.0;
+  };
+  Figures figures(const std::vector<int>& faces) const {
+    Figures out;
+    double weight = 0.0;
+    for (const int f : faces) {
+      const Eigen::Vector2d sigma = singular_values(f);
+      if (!sigma.allFinite()) continue;
+      out.smallest = std::min(out.smallest, sigma(1));
+      out.largest = std::max(out.largest, sigma(0));
+      const Eigen::Vector3d b0 = V_.row(F_(f, 0)), b1 = V_.row(F_(f, 1)), b2 = V_.row(F_(f, 2));
+      const double area_b = (b1 - b0).cross(b2 - b0).norm();
+      out.mean_l2 += area_b * std::sqrt(0.5 * sigma.squaredNorm());
+      weight += area_b;
+    }
+    if (weight > 0.0) out.mean_l2 /= weight;
+    return out;
+  }
+
+  /// Largest singular value of a 2 by 2 matrix, and (in `smallest`) its smallest.
+  static double singular_pair(const Eigen::Matrix2d& M, double& smallest) {
+    const double frobenius2 = M.squaredNorm(), det = M.determinant();
+    const double root = std::sqrt(std::max(0.0, frobenius2 * frobenius2 - 4.0 * det * det));
+    smallest = std::sqrt(std::max(0.0, 0.5 * (frobenius2 - root)));
+    return std::sqrt(0.5 * (frobenius2 + root));
+  }
+
+  /// The worst compression of v's triangles with v at chart point x: the largest singular value of their maps from B
+  /// (scaled) to the chart, i.e. 1 / sigma2 of DESIGN.md's map; `stretch` gets the largest 1 / (smallest singular
+  /// value), DESIGN.md's sigma1. Infinite when a triangle is not positive.
+  double worst_compression(const Ring& ring, const Eigen::Vector2d& x, double& stretch) const {
+    double worst = 0.0;
+    stretch = 0.0;
+    for (std::size_t k = 0; k < ring.a.size(); ++k) {
+      Eigen::Matrix2d Q;
+      Q.col(0) = ring.a[k] - x;
+      Q.col(1) = ring.b[k] - x;
+      if (!(Q.determinant() > 0.0)) return std::numeric_limits<double>::infinity();
+      double smallest = 0.0;
+      worst = std::max(worst, singular_pair(Q * ring.inverse_shape[k], smallest));
+      stretch = std::max(stretch, 1.0 / smallest);
+    }
+    return worst;
+  }
+
+  /// Moves v to where the worst compression of its triangles is least (compass search in its chart: the largest
+  /// singular value of an affine map is convex in v's position, and so is their maximum), while their largest
+  /// stretch stays at most max(now, 1 / compression_seed); checked again on A after the lift. True when v moved.
+  bool relieve_vertex(int v, Ring& ring) {
+    if (!chart(v, ring) || !shapes_of(v)) return false;
+    ring.inverse_shape.clear();
+    for (int j = vf_.begin(v); j < vf_.end(v); ++j) ring.inverse_shape.push_back(shapes_[std::size_t(j)].inverse);
+    for (const char seam : ring.seam)
+      if (seam) return false;
+    double stretch_now = 0.0;
+    const double now = worst_compression(ring, Eigen::Vector2d::Zero(), stretch_now);
+    // Only while a triangle is compressed beyond the seed: the search targets the worst triangle alone, and moving
+    // further than that costs the others' stretch.
+    const double enough = 1.0 / options_.compression_seed;
+    if (!std::isfinite(now) || now <= enough) return false;
+    const double stretch_limit = std::max(stretch_now, 1.0 / options_.compression_seed);
+    // The first step: a quarter of the distance to the nearest opposite edge, so that the search starts inside the
+    // ring's kernel.
+    double reach = std::numeric_limits<double>::infinity();
+    for (std::size_t k = 0; k < ring.a.size(); ++k) {
+      const Eigen::Vector2d edge = ring.b[k] - ring.a[k];
+      if (!(edge.norm() > 0.0)) return false;
+      reach = std::min(reach, std::abs(2.0 * area(ring.a[k], ring.b[k])) / edge.norm());
+    }
+    const double first = 0.25 * reach;
+    Eigen::Vector2d x = Eigen::Vector2d::Zero();
+    double best = now;
+    constexpr int kDirections = 8;
+    for (double step = first; step > 1e-3 * first && best > enough;) {
+      bool improved = false;
+      for (int d = 0; d < kDirections; ++d) {
+        const double angle = 2.0 * M_PI * d / kDirections;
+        const Eigen::Vector2d y = x + step * Eigen::Vector2d(std::cos(angle), std::sin(angle));
+        double stretch = 0.0;
+        const double value = worst_compression(ring, y, stretch);
+        if (value < best * (1.0 - 1e-9) && stretch <= stretch_limit) {
+          x = y;
+          best = value;
+          improved = true;
+        }
+      }
+      if (!improved) step *= 0.5;
+    }
+    if (!(best < now * (1.0 - 1e-6))) return false;
+    // The exact figures on A, before and after the lift.
+    const Figures before = vertex_figures(v);
+    const Eigen::Vector3d label = labels_.row(v).transpose();
+    const int face = face_of_[std::size_t(v)];
+    const char was_moved = moved_[std::size_t(v)];
+    // The chart's figures differ from A's by a little: where A's refuse the move, a shorter one (which the convexity
+    // above still makes better, if by less) is tried.
+    for (int shorter = 0; shorter < 4; ++shorter, x *= 0.5) {
+      move(v, lifted(v, ring, x));
+      bool good = true;
+      for (int j = vf_.begin(v); j < vf_.end(v) && good; ++j)
+        good = !spans_seam(vf_.face(j)) && classify(vf_.face(j)) == kGood;
+      const Figures after = vertex_figures(v);
+      if (good && after.smallest > before.smallest &&
+          after.largest <= std::max(before.largest, 1.0 / options_.compression_seed))
+        return true;
+      labels_.row(v) = label.transpose();
+      face_of_[std::size_t(v)] = face;
+      moved_[std::size_t(v)] = was_moved;
+    }
+    return false;
+  }
+
+  Figures vertex_figures(int v) const {
+    std::vector<int> faces;
+    for (int j = vf_.begin(v); j < vf_.end(v); ++j) faces.push_back(vf_.face(j));
+    return figures(faces);
+  }
+
+  /// Relief of compression (UntangleOptions::compression_seed). The vertices of good triangles whose sigma2 is below
+  /// the seed, with compression_rings rings, first descend the symmetric Dirichlet energy with Newton steps (the
+  /// smoothing's curvature bound is that of the stiffest direction, and a fan squeezed in one direction barely moves
+  /// under it), then each moves to where its worst triangle is least compressed (relieve_vertex), sweep after sweep
+  /// in index order while any moves. The whole relief is undone unless it raises the smallest sigma2 of the
+  /// triangles it touched, keeps their largest sigma1 at most max(before, 1 / compression_seed) and leaves no more of
+  /// them bad or spanning a seam: where the map must fold (a handle of B) the Newton steps can squeeze the folded
+  /// triangles, which the energy leaves out.
+  void relieve_compression(UntangleResult& result) {
+    if (!(options_.compression_seed > 0.0)) return;
+    const Eigen::MatrixX2d sigma = singular_values_per_triangle(A_, V_, F_, labels_, {options_.collapse_ratio});
+    std::vector<char> member(std::size_t(V_.rows()), 0);
+    std::vector<int> inside, frontier;
+    double global_largest = 0.0;
+    for (Eigen::Index f = 0; f < F_.rows(); ++f) {
+      if (std::isfinite(sigma(f, 0)) && state_[std::size_t(f)] != kSeam)
+        global_largest = std::max(global_largest, sigma(f, 0));
+      if (state_[std::size_t(f)] == kGood && sigma(f, 1) < options_.compression_seed)
+        for (int k = 0; k < 3; ++k)
+          if (!member[std::size_t(F_(f, k))]) {
+            member[std::size_t(F_(f, k))] = 1;
+            inside.push_back(F_(f, k));
+          }
+    }
+    if (inside.empty()) return;
+    frontier = inside;
+    for (int ring = 0; ring < options_.compression_rings; ++ring) add_ring(frontier, member, inside);
+    // Vertices of seam, folded or collapsed triangles stay: the smoothing leaves those triangles out of its energy, so
+    // nothing would hold them back.
+    for (const int v : inside)
+      for (int j = vf_.begin(v); j < vf_.end(v) && member[std::size_t(v)]; ++j)
+        if (wall_[std::size_t(v)] || state_[std::size_t(vf_.face(j))] != kGood) member[std::size_t(v)] = 0;
+    // Each part of the grown region (joined through B's edges) is relieved, and judged, on its own.
+    std::sort(inside.begin(), inside.end());
+    std::vector<char> done(std::size_t(V_.rows()), 0);
+    for (const int v0 : inside) {
+      if (!member[std::size_t(v0)] || done[std::size_t(v0)]) continue;
+      std::vector<int> part{v0};
+      done[std::size_t(v0)] = 1;
+      for (std::size_t i = 0; i < part.size(); ++i)
+        for (int j = vf_.begin(part[i]); j < vf_.end(part[i]); ++j)
+          for (int k = 0; k < 3; ++k) {
+            const int u = F_(vf_.face(j), k);
+            if (!member[std::size_t(u)] || done[std::size_t(u)]) continue;
+            done[std::size_t(u)] = 1;
+            part.push_back(u);
+          }
+      std::sort(part.begin(), part.end());
+      ++result.compression_parts;
+      if (std::int64_t(part.size()) > options_.max_compression_vertices) continue;
+      result.compression_parts_relieved += relieve_part(part, global_largest, result);
+    }
+  }
+
+  /// relieve_compression() on one part of the region (sorted vertices); true when kept.
+  bool relieve_part(std::vector<int>& part, double global_largest, UntangleResult& result) {
+    std::vector<int> faces;
+    for (const int v : part)
+      for (int j = vf_.begin(v); j < vf_.end(v); ++j) faces.push_back(vf_.face(j));
+    std::sort(faces.begin(), faces.end());
+    faces.erase(std::unique(faces.begin(), faces.end()), faces.end());
+    const auto defects = [&] {
+      std::int64_t count = 0;
+      for (const int f : faces) count += spans_seam(f) || classify(f) != kGood;
+      return count;
+    };
+    const Figures before = figures(faces);
+    const std::int64_t defects_before = defects();
+    struct Saved {
+      Eigen::Vector3d label;
+      int face;
+      char moved;
+    };
+    std::vector<Saved> saved;
+    for (const int v : part)
+      saved.push_back({labels_.row(v).transpose(), face_of_[std::size_t(v)], moved_[std::size_t(v)]});
+
+    std::swap(region_, part);
+    newton_ = true;
+    smooth(result, options_.compression_smoothing_sweeps);
+    newton_ = false;
+    std::swap(region_, part);
+    Ring ring;
+    for (int sweep = 0; sweep < options_.compression_sweeps; ++sweep) {
+      std::int64_t moves = 0;
+      for (const int v : part) moves += relieve_vertex(v, ring);
+      result.compression_moves += moves;
+      ++result.compression_sweeps;
+      if (moves == 0) break;
+    }
+    const Figures after = figures(faces);
+    const bool keep =
+        after.smallest >= before.smallest && (after.smallest > before.smallest || after.largest < before.largest) &&
+        after.largest <= std::max({before.largest, global_largest, 1.0 / options_.compression_seed}) &&
+        after.mean_l2 <= (1.0 + options_.compression_mean_tolerance) * before.mean_l2 && defects() <= defects_before;
+    if (keep) {
+      for (const int f : faces)
+        if (state_[std::size_t(f)] != kSeam) state_[std::size_t(f)] = classify(f);
+      for (const int v : part)
+        if (!in_region_[std::size_t(v)]) {
+          in_region_[std::size_t(v)] = 1;
+          region_.push_back(v);
+        }
+      return true;
+    }
+    for (std::size_t i = 0; i < part.size(); ++i) {
+      labels_.row(part[i]) = saved[i].label.transpose();
+      face_of_[std::size_t(part[i])] = saved[i].face;
+      moved_[std::size_t(part[i])] = saved[i].moved;
+    }
+    return false;
+  }
+
   std::vector<int> rebuild_patches(UntangleResult& result) {
     const Eigen::Index nv = V_.rows(), nf = F_.rows();
     std::vector<char> tried(std::size_t(nf), 0), seen(std::size_t(nv), 0);
@@ -648,28 +991,9 @@ class Untangler {
     for (Eigen::Index f0 = 0; f0 < nf; ++f0) {
       if (!seed(state_[std::size_t(f0)]) || tried[std::size_t(f0)]) continue;
       bool seam_cluster = false;
-      // The cluster: bad triangles joined through shared vertices.
-      std::vector<int> seeds, stack{int(f0)};
-      tried[std::size_t(f0)] = 1;
-      while (!stack.empty()) {
-        const int f = stack.back();
-        stack.pop_back();
-        seam_cluster = seam_cluster || state_[std::size_t(f)] == kSeam;
-        for (int k = 0; k < 3; ++k) {
-          const int v = F_(f, k);
-          if (seen[std::size_t(v)]) continue;
-          seen[std::size_t(v)] = 1;
-          seeds.push_back(v);
-          for (int j = vf_.begin(v); j < vf_.end(v); ++j) {
-            const int g = vf_.face(j);
-            if (seed(state_[std::size_t(g)]) && !tried[std::size_t(g)]) {
-              tried[std::size_t(g)] = 1;
-              stack.push_back(g);
-            }
-          }
-        }
-      }
-      for (const int v : seeds) seen[std::size_t(v)] = 0;
+      const std::vector<int> seeds = cluster_of(
+          int(f0), [&](int f) { return seed(state_[std::size_t(f)]); }, tried, seen,
+          [&](int f) { seam_cluster |= state_[std::size_t(f)] == kSeam; });
       ++result.patches_tried;
       // Rings around the seeds; the patch is the triangles with all corners inside.
       std::vector<int> inside = seeds;
@@ -679,35 +1003,14 @@ class Untangler {
       // A patch that has reached a seam may grow as far as a seam's cluster (UntangleOptions::max_seam_patch_rings).
       bool near_seam = options_.heal_seams && seam_cluster;
       for (int rings = 1; rings <= (near_seam ? options_.max_seam_patch_rings : options_.max_patch_rings); ++rings) {
-        std::vector<int> next;
-        for (const int v : frontier)
-          for (int j = vf_.begin(v); j < vf_.end(v); ++j)
-            for (int k = 0; k < 3; ++k) {
-              const int u = F_(vf_.face(j), k);
-              if (member[std::size_t(u)]) continue;
-              member[std::size_t(u)] = 1;
-              next.push_back(u);
-            }
-        inside.insert(inside.end(), next.begin(), next.end());
-        frontier = std::move(next);
+        add_ring(frontier, member, inside);
         if (std::int64_t(inside.size()) > (near_seam ? options_.max_seam_patch_vertices : options_.max_patch_vertices))
           break;
-        // Tried at patch_rings, then at each doubling (2, 4, 8 rings by default).
-        if (rings < options_.patch_rings || rings % options_.patch_rings != 0 ||
-            ((rings / options_.patch_rings) & (rings / options_.patch_rings - 1)) != 0)
-          continue;
+        if (!tried_at(rings)) continue;
         if (options_.heal_seams) enclose(inside, member, options_.max_seam_patch_vertices);
-        std::vector<int> faces;
-        for (const int v : inside)
-          for (int j = vf_.begin(v); j < vf_.end(v); ++j) {
-            const int f = vf_.face(j);
-            // Seam triangles inside count too: where a patch is a disk whose boundary is a simple loop in one chart,
-            // the labels that span the seam threshold in it are a fold's jump, not a tear the topology forces.
-            if (member[std::size_t(F_(f, 0))] && member[std::size_t(F_(f, 1))] && member[std::size_t(F_(f, 2))])
-              faces.push_back(f);
-          }
-        std::sort(faces.begin(), faces.end());
-        faces.erase(std::unique(faces.begin(), faces.end()), faces.end());
+        // Seam triangles inside count too: where a patch is a disk whose boundary is a simple loop in one chart, the
+        // labels that span the seam threshold in it are a fold's jump, not a tear the topology forces.
+        const std::vector<int> faces = faces_within(inside, member);
         for (const int f : faces) near_seam = near_seam || (options_.heal_seams && state_[std::size_t(f)] == kSeam);
         std::vector<int> moved;
         // Where no tangent plane holds the patch's loop as a simple polygon, a chart of directions may (near a seam).
@@ -962,6 +1265,7 @@ class Untangler {
   const UntangleOptions& options_;
   const VertexFaces vf_;
   std::vector<char> state_, wall_, moved_, in_region_;
+  bool newton_ = false;        // smooth_vertex(): Newton steps (relieve_compression) instead of the curvature bound's
   bool chart_failed_ = false;  // lay_out_patch(): its last failure was the chart's (a point or the loop)
   Eigen::Vector3d centre_ = Eigen::Vector3d::Zero();  // A's vertices' mean: the centre of the direction charts
   double reach_ = 0.0;        // twice A's bounding-box diagonal: rays of the direction charts end beyond A

@@ -8,7 +8,10 @@
 // Freitag and Plassmann 2000), the region growing while that rights triangles; then the region, the triangles
 // stretched beyond UntangleOptions::stretch_seed (though not folded) and a few more rings around both descend the
 // symmetric Dirichlet energy of their triangles, which keeps every positive triangle positive and spreads the squeezed
-// patches. Where B has handles that the source lacks, some folds are forced (README, Riemann-Hurwitz) and stay.
+// patches. Last, the parts of the map around triangles compressed beyond UntangleOptions::compression_seed are
+// relieved (Newton steps of the same energy, then each vertex to where its worst triangle is least compressed), each
+// part kept only where its figures improve. Where B has handles that the source lacks, some folds are forced (README,
+// Riemann-Hurwitz) and stay.
 #pragma once
 
 #include <Eigen/Core>
@@ -48,6 +51,29 @@ struct UntangleOptions {
   /// sphere -> bunny at 24, 28, 30, 32, 36, 40, 44, 48, 56 voxels: max stretch 75.8, 18.9, 11.0, 24.7, 9.0, 18.8,
   /// 19.5, 19.2, 22.6 against 1354, 71, 34.6, 30.6, 126, 18.8, -, 32.7, 798 without (README, "Fold repair").
   double stretch_seed = 8.0;
+  /// Relief of compression, after the smoothing: where a good triangle's sigma2 (DESIGN.md's compression, as
+  /// measure_stretch normalises it) is below this, its corners and `compression_rings` rings around them (leaving
+  /// out the vertices of seam, folded or collapsed triangles) descend the symmetric Dirichlet energy with Newton steps
+  /// (`compression_smoothing_sweeps` sweeps), then each vertex moves, one at a time, to where its worst triangle is
+  /// least compressed (`compression_sweeps` sweeps at most). Each connected part of that region is kept only where
+  /// its smallest sigma2 does not fall, its smallest sigma2 rises or its largest sigma1 falls, its largest sigma1
+  /// stays at most max(before, the map's largest, 1 / compression_seed), its mean L2 rises by at most
+  /// compression_mean_tolerance and none of its triangles turns bad or spans a seam; otherwise it is put back.
+  /// Measured at the defaults on sphere -> bunny (README, "Relieving compression"): min compression 0.048 -> 0.187,
+  /// mean 1.233 -> 1.222, variance 0.213 -> 0.152, p99 3.26 -> 2.75, coverage 1.017 -> 1.003, for 2 s more repair.
+  /// 0 turns it off.
+  double compression_seed = 0.25;
+  /// Rings around the compressed triangles' corners. On sphere -> bunny at the defaults (seed 0.25) 4, 6, 8, 10, 12,
+  /// 16 rings gave min compression 0.145, 0.166, 0.181, 0.180, 0.187, 0.200 and variance 0.217, 0.202, 0.175, 0.160,
+  /// 0.152, 0.151 (with 4000 vertices at most per part; 16 rings needed 8000).
+  int compression_rings = 12;
+  int compression_smoothing_sweeps = 1000;  ///< Newton sweeps of the symmetric Dirichlet smoothing over each part
+  int compression_sweeps = 200;             ///< sweeps of the worst-triangle moves over each part
+  /// Parts larger than this are left as they are: on cow -> horse (63 voxels) the squeezed legs make one part of
+  /// 16 k vertices, and such parts next to folds were put back anyway (Buddha, spot -> horse, sphere -> horse at 8000:
+  /// 2-5 s more repair for no change kept but the Buddha's mean 1.294 -> 1.234).
+  std::int64_t max_compression_vertices = 4000;
+  double compression_mean_tolerance = 0.01;  ///< how far (relative) a part's mean L2 may rise in a kept relief
   /// The vertices of a stretched triangle move in the smoothing even where they belong to a seam triangle (which
   /// the untangling keeps in place), with the seam triangles left out of the energy and no step letting a side of
   /// the seam cross the other (a positive seam triangle turning over). The slivers beside the ear's seam on sphere
@@ -143,9 +169,13 @@ struct UntangleResult {
   std::int64_t seams_healed = 0;          ///< of those, patches whose cluster held seam triangles
   std::int64_t seam_triangles_after = 0;  ///< triangles still spanning a topological seam at the end
   std::int64_t patch_vertices = 0;        ///< inner vertices of the rebuilt patches
-  std::int64_t layouts_untangled = 0;     ///< patch layouts that folded in their chart and were untangled (kept or not)
-  int rounds = 0;                         ///< rounds run
-  int sweeps = 0;                         ///< sweeps run, over all rounds
+  std::int64_t compression_parts = 0;     ///< connected parts of the relief's region
+  std::int64_t compression_parts_relieved = 0;  ///< of those, parts whose relief was kept
+  std::int64_t compression_moves = 0;           ///< worst-triangle moves, over all sweeps (kept or not)
+  int compression_sweeps = 0;                   ///< sweeps of the worst-triangle moves, over all parts
+  std::int64_t layouts_untangled = 0;  ///< patch layouts that folded in their chart and were untangled (kept or not)
+  int rounds = 0;                      ///< rounds run
+  int sweeps = 0;                      ///< sweeps run, over all rounds
   double seconds = 0.0;
 };
 

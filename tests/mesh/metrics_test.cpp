@@ -3,6 +3,7 @@
 
 #include <gtest/gtest.h>
 
+#include <Eigen/Geometry>
 #include <cmath>
 
 #include "mesh/errors.h"
@@ -158,6 +159,28 @@ TEST(Stretch, PerTriangleValuesAgreeWithTheStatistics) {
   const Eigen::VectorXd l2_identity = stretch_per_triangle(A, A.V, faces_of(A), A.V);
   EXPECT_NEAR(l2_identity.minCoeff(), 1.0, 1e-9);
   EXPECT_NEAR(l2_identity.maxCoeff(), 1.0, 1e-9);
+}
+
+TEST(Stretch, SingularValuesOfAnAffineMap) {
+  // The unit right triangle in the plane z = 0, carried by diag(3, 0.5, 1) then rotated: singular values 3 and 0.5.
+  Eigen::Matrix<double, 3, 2> Ep, Eq;
+  Ep << 1.0, 0.0, 0.0, 1.0, 0.0, 0.0;
+  const Eigen::Matrix3d R = Eigen::AngleAxisd(0.7, Eigen::Vector3d(1.0, 2.0, -0.5).normalized()).toRotationMatrix();
+  Eq = R * Eigen::Vector3d(3.0, 0.5, 1.0).asDiagonal() * Ep;
+  const Eigen::Vector2d sigma = triangle_singular_values(Ep, Eq);
+  EXPECT_NEAR(sigma(0), 3.0, 1e-12);
+  EXPECT_NEAR(sigma(1), 0.5, 1e-12);
+  Ep.col(1) = 2.0 * Ep.col(0);  // flat
+  EXPECT_TRUE(std::isnan(triangle_singular_values(Ep, Eq)(0)));
+  // Per triangle, the columns agree with the statistics' extremes.
+  const Surface A = unit_sphere();
+  Eigen::MatrixXd B = A.V;
+  for (Eigen::Index i = 0; i < B.rows(); ++i) B(i, 0) *= 1.0 + 0.5 * (A.V(i, 2) + 1.0);
+  const StretchResult r = measure_stretch(A, B, faces_of(A), A.V);
+  const Eigen::MatrixX2d per = singular_values_per_triangle(A, B, faces_of(A), A.V);
+  EXPECT_NEAR(per.col(0).maxCoeff(), r.max_sigma1, 1e-12);
+  EXPECT_NEAR(per.col(1).minCoeff(), r.min_sigma2, 1e-12);
+  EXPECT_TRUE((per.col(0).array() >= per.col(1).array()).all());
 }
 
 }  // namespace

@@ -212,6 +212,7 @@ TEST(Untangle, SmoothingSpreadsASqueezedPatch) {
   // Without the stretched seeds nothing is bad, and nothing moves.
   UntangleOptions off = enabled();
   off.stretch_seed = 0.0;
+  off.compression_seed = 0.0;  // the squeezed disk's rim is compressed
   Eigen::MatrixXd untouched = damaged;
   EXPECT_EQ(untangle_labels(A, locator, A.V, A.F, untouched, off).vertices_moved, 0);
   EXPECT_TRUE(untouched == damaged);
@@ -350,6 +351,51 @@ TEST(Untangle, DirectionChartHoldsAlmostEveryDirectionOneToOne) {
   EXPECT_GT(a.x() * b.y() - a.y() * b.x(), 0.0);
 }
 
+// The fine sphere with the disk of about four rings around c squashed along a tangent direction u, to a tenth at
+// the centre and smoothly back to the identity at the rim (monotone along u, so still a surface): as the target of
+// the identity labels nothing folds, but the disk's triangles are compressed (sigma2 about 0.1), as where the traced
+// map fans out at the bunny's ears.
+Eigen::MatrixXd squashed_target(const Surface& A) {
+  const Eigen::Vector3d c = Eigen::Vector3d(-0.2, 0.4, 1.0).normalized();
+  const Eigen::Vector3d u = c.cross(Eigen::Vector3d::UnitX()).normalized();
+  const double rim = 4.0 * mean_edge(A);
+  Eigen::MatrixXd V = A.V;
+  for (Eigen::Index i = 0; i < A.V.rows(); ++i) {
+    const Eigen::Vector3d p = A.V.row(i).transpose();
+    const double r = (p - c).norm();
+    if (r >= rim) continue;
+    const double squash = 0.1 + 0.9 * (r / rim) * (r / rim);  // increasing in r: the squash keeps the order along u
+    V.row(i) = (p - (1.0 - squash) * (p - c).dot(u) * u).transpose();
+  }
+  return V;
+}
+
+TEST(Untangle, RelievesACompressedPatch) {
+  const Surface A = fine_sphere();
+  const SurfaceLocator locator(A);
+  const Eigen::MatrixXd B = squashed_target(A);
+  const StretchResult before = measure_stretch(A, B, A.F, A.V);
+  ASSERT_EQ(before.folded + before.collapsed, 0);
+  ASSERT_LT(before.min_sigma2, 0.15);
+  Eigen::MatrixXd labels = A.V;
+  const UntangleResult r = untangle_labels(A, locator, B, A.F, labels, enabled());
+  EXPECT_GE(r.compression_parts_relieved, 1);
+  const StretchResult after = measure_stretch(A, B, A.F, labels);
+  EXPECT_EQ(after.folded + after.collapsed, 0);
+  EXPECT_GT(after.min_sigma2, 1.5 * before.min_sigma2) << before.min_sigma2 << " -> " << after.min_sigma2;
+  // The relief's bound on the largest stretch: max(before, 1 / compression_seed).
+  EXPECT_LE(after.max_sigma1, std::max(before.max_sigma1, 1.0 / enabled().compression_seed) + 1e-9);
+  EXPECT_LE(after.mean_l2, (1.0 + enabled().compression_mean_tolerance) * before.mean_l2 + 1e-9);
+  EXPECT_NEAR(after.coverage, 1.0, 0.02);
+  for (const SurfaceHit& hit : locator.closest_all(labels)) EXPECT_LT(hit.distance, 1e-9);
+  // Off, nothing in the map is bad or stretched, and nothing moves.
+  UntangleOptions off = enabled();
+  off.compression_seed = 0.0;
+  Eigen::MatrixXd untouched = A.V;
+  EXPECT_EQ(untangle_labels(A, locator, B, A.F, untouched, off).vertices_moved, 0);
+  EXPECT_TRUE(untouched == A.V);
+}
+
 TEST(Untangle, LeavesAGoodMapAlone) {
   const Surface A = unit_sphere();
   const SurfaceLocator locator(A);
@@ -374,23 +420,34 @@ TEST(Untangle, DisabledOnlyCounts) {
   EXPECT_TRUE(labels == original);
 }
 
-// Folds and collapses (the untangling), and a squeezed patch (the smoothing's stretched seeds and its rounds).
+// Folds and collapses (the untangling), a squeezed patch (the smoothing's stretched seeds and its rounds), a healed
+// seam and a relieved compression.
 TEST(Untangle, ResultDoesNotDependOnTheThreadCount) {
   const Surface coarse = unit_sphere();
   const Surface fine = fine_sphere();
   // The mirrored star's patch layout folds in its chart and is untangled (PatchLayoutThatFoldsInItsChartIsUntangled);
   // the carried cap's seam is healed.
-  for (const auto& [A, damaged] : {std::pair{&coarse, damaged_labels(coarse)}, std::pair{&fine, squeezed_disk(fine)},
-                                   std::pair{&fine, mirrored_star(fine)}, std::pair{&fine, carried_cap(fine)}}) {
+  // The squashed target's compression is relieved (RelievesACompressedPatch).
+  const Eigen::MatrixXd squashed = squashed_target(fine);
+  struct Case {
+    const Surface* A;
+    const Eigen::MatrixXd* B;
+    Eigen::MatrixXd damaged;
+  };
+  for (const Case& c : {Case{&coarse, &coarse.V, damaged_labels(coarse)}, Case{&fine, &fine.V, squeezed_disk(fine)},
+                        Case{&fine, &fine.V, mirrored_star(fine)}, Case{&fine, &fine.V, carried_cap(fine)},
+                        Case{&fine, &squashed, fine.V}}) {
+    const Surface* A = c.A;
+    const Eigen::MatrixXd& damaged = c.damaged;
     const SurfaceLocator locator(*A);
     Eigen::MatrixXd one = damaged, two = damaged;
     {
       const tbb::global_control limit(tbb::global_control::max_allowed_parallelism, 1);
-      untangle_labels(*A, locator, A->V, A->F, one, enabled());
+      untangle_labels(*A, locator, *c.B, A->F, one, enabled());
     }
     {
       const tbb::global_control limit(tbb::global_control::max_allowed_parallelism, 2);
-      untangle_labels(*A, locator, A->V, A->F, two, enabled());
+      untangle_labels(*A, locator, *c.B, A->F, two, enabled());
     }
     EXPECT_FALSE(one == damaged);
     EXPECT_TRUE(one == two);
