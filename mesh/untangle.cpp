@@ -10,9 +10,9 @@
 #include <Eigen/Sparse>
 #include <Eigen/SparseLU>
 #include <algorithm>
+#include <array>
 #include <chrono>
 #include <cmath>
-#include <cstdlib>
 #include <limits>
 #include <map>
 #include <numeric>
@@ -823,12 +823,19 @@ class Untangler {
     const double first = 0.25 * reach;
     Eigen::Vector2d x = Eigen::Vector2d::Zero();
     double best = now;
-    constexpr int kDirections = 8;
+    const double diagonal = std::sqrt(0.5);
+    const std::array<Eigen::Vector2d, 8> directions{{{1.0, 0.0},
+                                                     {diagonal, diagonal},
+                                                     {0.0, 1.0},
+                                                     {-diagonal, diagonal},
+                                                     {-1.0, 0.0},
+                                                     {-diagonal, -diagonal},
+                                                     {0.0, -1.0},
+                                                     {diagonal, -diagonal}}};
     for (double step = first; step > 1e-3 * first && best > enough;) {
       bool improved = false;
-      for (int d = 0; d < kDirections; ++d) {
-        const double angle = 2.0 * M_PI * d / kDirections;
-        const Eigen::Vector2d y = x + step * Eigen::Vector2d(std::cos(angle), std::sin(angle));
+      for (const Eigen::Vector2d& direction : directions) {
+        const Eigen::Vector2d y = x + step * direction;
         double stretch = 0.0;
         const double value = worst_compression(ring, y, stretch);
         if (value < best * (1.0 - 1e-9) && stretch <= stretch_limit) {
