@@ -207,7 +207,7 @@ void add_pipeline_options(CLI::App& cmd, PipelineOptions& o) {
                  "With --fold-repair on, relieve the parts of the map around triangles compressed below this sigma2 "
                  "(Newton steps of the symmetric Dirichlet smoothing, then each vertex moved to where its worst "
                  "triangle is least compressed; a part is kept only where its figures improve; 0: off)")
-      ->check(CLI::NonNegativeNumber)
+      ->check(kNonNegative)
       ->capture_default_str();
   cmd.add_option_function<std::string>(
          "--stalled-fill", [&o](const std::string& value) { o.stalled_fill = value; },

@@ -269,6 +269,8 @@ TEST_F(Cli, NumericOptionsNameTheirRangeAndTheValue) {
   // CLI11's validators called a word "not in range" and printed the largest double in full as the bound.
   expect_rejected("sphere torus --trace-step -1", "--trace-step: must be a positive number, not '-1'");
   expect_rejected("sphere torus --tolerance 1e-9x", "--tolerance: must be a positive number, not '1e-9x'");
+  expect_rejected("sphere torus --compression-seed -1",
+                  "--compression-seed: must be zero or a positive number, not '-1'");
   expect_rejected("sphere torus --zero-snap 0.5", "--zero-snap: must be a number from 0 to 0.45, not '0.5'");
   expect_rejected("sphere torus --threads 1.5", "--threads: must be a whole number of at least 0, not '1.5'");
   expect_rejected("sphere torus --trace-smoothing 101",
