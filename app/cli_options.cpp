@@ -44,6 +44,14 @@ CLI::Validator real_above_zero(bool strict) {
 const CLI::Validator kPositive = real_above_zero(true);
 const CLI::Validator kNonNegative = real_above_zero(false);
 
+/// An on/off option setting `flag`; its default is the flag's value when the option is declared.
+void add_switch(CLI::App& cmd, const std::string& name, bool& flag, const std::string& help) {
+  cmd.add_option_function<std::string>(
+         name, [&flag](const std::string& value) { flag = value == "on"; }, help)
+      ->check(CLI::IsMember({"on", "off"}))
+      ->default_str(flag ? "on" : "off");
+}
+
 /// A finite number in [lo, hi].
 CLI::Validator real_in(double lo, double hi) {
   const std::string range = "from " + shortest(lo) + " to " + shortest(hi);
@@ -183,26 +191,17 @@ void add_pipeline_options(CLI::App& cmd, PipelineOptions& o) {
                  "farther apart than this fraction of the source's bounding-box diagonal")
       ->check(kPositive)
       ->capture_default_str();
-  cmd.add_option_function<std::string>(
-         "--fold-repair", [&o](const std::string& value) { o.untangle.enabled = value == "on"; },
-         "Repair folded and collapsed triangles of the target's map by local untangling in charts of the "
-         "source, then symmetric Dirichlet smoothing around them (on or off; the closest-point method is never "
-         "repaired)")
-      ->check(CLI::IsMember({"on", "off"}))
-      ->default_str("on");
-  cmd.add_option_function<std::string>(
-         "--heal-seams", [&o](const std::string& value) { o.untangle.heal_seams = value == "on"; },
-         "With --fold-repair on, also lay out again the patches around topological seams that the ends' topology "
-         "does not force (a disk around the seam whose boundary is a simple loop on the source), which closes them "
-         "(on or off)")
-      ->check(CLI::IsMember({"on", "off"}))
-      ->default_str("on");
-  cmd.add_option_function<std::string>(
-         "--direction-charts", [&o](const std::string& value) { o.untangle.direction_charts = value == "on"; },
-         "With --heal-seams on, try a seam's patch that no tangent plane of the source holds again in a "
-         "stereographic chart of the directions from the source's centre (for a star-shaped source; on or off)")
-      ->check(CLI::IsMember({"on", "off"}))
-      ->default_str("off");
+  add_switch(cmd, "--fold-repair", o.untangle.enabled,
+             "Repair folded and collapsed triangles of the target's map by local untangling in charts of the "
+             "source, then symmetric Dirichlet smoothing around them (on or off; the closest-point method is never "
+             "repaired)");
+  add_switch(cmd, "--heal-seams", o.untangle.heal_seams,
+             "With --fold-repair on, also lay out again the patches around topological seams that the ends' topology "
+             "does not force (a disk around the seam whose boundary is a simple loop on the source), which closes them "
+             "(on or off)");
+  add_switch(cmd, "--direction-charts", o.untangle.direction_charts,
+             "With --heal-seams on, try a seam's patch that no tangent plane of the source holds again in a "
+             "stereographic chart of the directions from the source's centre (for a star-shaped source; on or off)");
   cmd.add_option("--compression-seed", o.untangle.compression_seed,
                  "With --fold-repair on, relieve the parts of the map around triangles compressed below this sigma2 "
                  "(Newton steps of the symmetric Dirichlet smoothing, then each vertex moved to where its worst "
@@ -216,12 +215,10 @@ void add_pipeline_options(CLI::App& cmd, PipelineOptions& o) {
          "where the trace stopped (auto: with --fold-repair on; on; off)")
       ->check(CLI::IsMember({"auto", "on", "off"}))
       ->default_str("auto");
-  cmd.add_option_function<std::string>(
-         "--thin-features", [&o](const std::string& value) { o.morph.thin.enabled = value == "on"; },
-         "Keep sheets, rods and gaps thinner than a voxel on the lattice: a lattice edge crossing a mesh twice moves "
-         "its end nearer the surface to the other side, so thin parts open no handles (on or off)")
-      ->check(CLI::IsMember({"on", "off"}))
-      ->default_str("on");
+  add_switch(
+      cmd, "--thin-features", o.morph.thin.enabled,
+      "Keep sheets, rods and gaps thinner than a voxel on the lattice: a lattice edge crossing a mesh twice moves "
+      "its end nearer the surface to the other side, so thin parts open no handles (on or off)");
   cmd.add_option("--morph-topology", o.morph_topology.mode,
                  "Topology changes of the distance-field morph: auto (none that the ends do not force when both ends "
                  "have one topology on the lattice), preserve (always: forced changes come last) or free (the plain "

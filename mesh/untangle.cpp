@@ -125,11 +125,11 @@ double dirichlet(const Ring& ring, const Eigen::Vector2d& x, Eigen::Vector2d* gr
       // J = J0 - x m^T with m the column sums of P^-1; grad d from d = (a - x) x (b - x).
       const Eigen::Vector2d m = ring.inverse_shape[k].row(0).transpose() + ring.inverse_shape[k].row(1).transpose();
       const Eigen::Vector2d grad_d(ring.a[k].y() - ring.b[k].y(), ring.b[k].x() - ring.a[k].x());
-      *gradient += w * (-2.0 * (J * m) * (1.0 + ratio) - 2.0 * N * ratio / d * grad_d);
+      const Eigen::Vector2d grad_n = -2.0 * (J * m);  // of N = |J|^2
+      *gradient += w * (grad_n * (1.0 + ratio) - 2.0 * N * ratio / d * grad_d);
       if (curvature)
         *curvature += w * (2.0 * m.squaredNorm() * (1.0 + ratio) + 6.0 * N * ratio / (d * d) * grad_d.squaredNorm());
       if (hessian) {
-        const Eigen::Vector2d grad_n = -2.0 * (J * m);
         *hessian += w * (2.0 * m.squaredNorm() * (1.0 + ratio) * Eigen::Matrix2d::Identity() -
                          2.0 * ratio / d * (grad_n * grad_d.transpose() + grad_d * grad_n.transpose()) +
                          6.0 * N * ratio / (d * d) * grad_d * grad_d.transpose());
@@ -337,13 +337,19 @@ class Untangler {
     });
   }
 
-  /// Classifies the triangles of the region's vertices again; returns the bad triangles of B.
-  std::int64_t reclassify_region() {
+  /// The triangles of the given vertices, sorted, each once.
+  std::vector<int> faces_around(const std::vector<int>& vertices) const {
     std::vector<int> faces;
-    for (const int v : region_)
+    for (const int v : vertices)
       for (int j = vf_.begin(v); j < vf_.end(v); ++j) faces.push_back(vf_.face(j));
     std::sort(faces.begin(), faces.end());
     faces.erase(std::unique(faces.begin(), faces.end()), faces.end());
+    return faces;
+  }
+
+  /// Classifies the triangles of the region's vertices again; returns the bad triangles of B.
+  std::int64_t reclassify_region() {
+    const std::vector<int> faces = faces_around(region_);
     tbb::parallel_for(std::size_t(0), faces.size(), [&](std::size_t i) {
       if (state_[std::size_t(faces[i])] != kSeam) state_[std::size_t(faces[i])] = classify(faces[i]);
     });
@@ -669,9 +675,6 @@ class Untangler {
       for (const int u : part) part_of_[std::size_t(u)] = -1;
   }
 
-  /// Lays out again, in one chart of A, each cluster of bad triangles with rings around it (see
-  /// UntangleOptions::rebuild_patches), cluster by cluster in order of their first triangle. Returns the inner
-  /// vertices of the rebuilt patches.
   /// The cluster of triangles `flagged` that holds f0, joined through shared vertices: its vertices, in the order
   /// found. `tried` (per triangle) marks the cluster's triangles; `seen` (per vertex) is all zero before and after.
   /// visit(f) is called for each of its triangles.
@@ -770,6 +773,31 @@ class Untangler {
     return out;
   }
 
+  /// Some vertices' labels as they were (label, face of A, whether moved), for a trial the relief may undo.
+  struct Snapshot {
+    std::vector<int> vertices;
+    Eigen::MatrixX3d labels;
+    std::vector<int> faces;
+    std::vector<char> moved;
+  };
+  Snapshot snapshot(const std::vector<int>& vertices) const {
+    Snapshot out{vertices, Eigen::MatrixX3d(Eigen::Index(vertices.size()), 3), {}, {}};
+    for (std::size_t i = 0; i < vertices.size(); ++i) {
+      out.labels.row(Eigen::Index(i)) = labels_.row(vertices[i]);
+      out.faces.push_back(face_of_[std::size_t(vertices[i])]);
+      out.moved.push_back(moved_[std::size_t(vertices[i])]);
+    }
+    return out;
+  }
+  void restore(const Snapshot& saved) {
+    for (std::size_t i = 0; i < saved.vertices.size(); ++i) {
+      const int v = saved.vertices[i];
+      labels_.row(v) = saved.labels.row(Eigen::Index(i));
+      face_of_[std::size_t(v)] = saved.faces[i];
+      moved_[std::size_t(v)] = saved.moved[i];
+    }
+  }
+
   /// Largest singular value of a 2 by 2 matrix, and (in `smallest`) its smallest.
   static double singular_pair(const Eigen::Matrix2d& M, double& smallest) {
     const double frobenius2 = M.squaredNorm(), det = M.determinant();
@@ -849,9 +877,7 @@ class Untangler {
     if (!(best < now * (1.0 - 1e-6))) return false;
     // The exact figures on A, before and after the lift.
     const Figures before = vertex_figures(v);
-    const Eigen::Vector3d label = labels_.row(v).transpose();
-    const int face = face_of_[std::size_t(v)];
-    const char was_moved = moved_[std::size_t(v)];
+    const Snapshot saved = snapshot({v});
     // The chart's figures differ from A's by a little: where A's refuse the move, a shorter one (which the convexity
     // above still makes better, if by less) is tried.
     for (int shorter = 0; shorter < 4; ++shorter, x *= 0.5) {
@@ -863,26 +889,19 @@ class Untangler {
       if (good && after.smallest > before.smallest &&
           after.largest <= std::max(before.largest, 1.0 / options_.compression_seed))
         return true;
-      labels_.row(v) = label.transpose();
-      face_of_[std::size_t(v)] = face;
-      moved_[std::size_t(v)] = was_moved;
+      restore(saved);
     }
     return false;
   }
 
-  Figures vertex_figures(int v) const {
-    std::vector<int> faces;
-    for (int j = vf_.begin(v); j < vf_.end(v); ++j) faces.push_back(vf_.face(j));
-    return figures(faces);
-  }
+  Figures vertex_figures(int v) const { return figures(faces_around({v})); }
 
   /// Relief of compression (UntangleOptions::compression_seed). The vertices of good triangles whose sigma2 is below
   /// the seed, with compression_rings rings, first descend the symmetric Dirichlet energy with Newton steps (the
   /// smoothing's curvature bound is that of the stiffest direction, and a fan squeezed in one direction barely moves
   /// under it), then each moves to where its worst triangle is least compressed (relieve_vertex), sweep after sweep
-  /// in index order while any moves. The whole relief is undone unless it raises the smallest sigma2 of the
-  /// triangles it touched, keeps their largest sigma1 at most max(before, 1 / compression_seed) and leaves no more of
-  /// them bad or spanning a seam: where the map must fold (a handle of B) the Newton steps can squeeze the folded
+  /// in index order while any moves. Each connected part of the region is judged on its own (relieve_part) and put
+  /// back unless its figures improve: where the map must fold (a handle of B) the Newton steps can squeeze the folded
   /// triangles, which the energy leaves out.
   void relieve_compression(UntangleResult& result) {
     if (!(options_.compression_seed > 0.0)) return;
@@ -930,13 +949,10 @@ class Untangler {
     }
   }
 
-  /// relieve_compression() on one part of the region (sorted vertices); true when kept.
+  /// relieve_compression() on one part of the region (sorted vertices); true when kept, on UntangleOptions::
+  /// compression_seed's terms (its smallest sigma2, largest sigma1, mean L2 and defects).
   bool relieve_part(std::vector<int>& part, double global_largest, UntangleResult& result) {
-    std::vector<int> faces;
-    for (const int v : part)
-      for (int j = vf_.begin(v); j < vf_.end(v); ++j) faces.push_back(vf_.face(j));
-    std::sort(faces.begin(), faces.end());
-    faces.erase(std::unique(faces.begin(), faces.end()), faces.end());
+    const std::vector<int> faces = faces_around(part);
     const auto defects = [&] {
       std::int64_t count = 0;
       for (const int f : faces) count += spans_seam(f) || classify(f) != kGood;
@@ -944,14 +960,7 @@ class Untangler {
     };
     const Figures before = figures(faces);
     const std::int64_t defects_before = defects();
-    struct Saved {
-      Eigen::Vector3d label;
-      int face;
-      char moved;
-    };
-    std::vector<Saved> saved;
-    for (const int v : part)
-      saved.push_back({labels_.row(v).transpose(), face_of_[std::size_t(v)], moved_[std::size_t(v)]});
+    const Snapshot saved = snapshot(part);
 
     std::swap(region_, part);
     newton_ = true;
@@ -981,14 +990,13 @@ class Untangler {
         }
       return true;
     }
-    for (std::size_t i = 0; i < part.size(); ++i) {
-      labels_.row(part[i]) = saved[i].label.transpose();
-      face_of_[std::size_t(part[i])] = saved[i].face;
-      moved_[std::size_t(part[i])] = saved[i].moved;
-    }
+    restore(saved);
     return false;
   }
 
+  /// Lays out again, in one chart of A, each cluster of bad triangles with rings around it (see
+  /// UntangleOptions::rebuild_patches), cluster by cluster in order of their first triangle. Returns the inner
+  /// vertices of the rebuilt patches.
   std::vector<int> rebuild_patches(UntangleResult& result) {
     const Eigen::Index nv = V_.rows(), nf = F_.rows();
     std::vector<char> tried(std::size_t(nf), 0), seen(std::size_t(nv), 0);
