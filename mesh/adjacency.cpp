@@ -1,6 +1,12 @@
 // Vertex -> incident tets (see adjacency.h).
 #include "mesh/adjacency.h"
 
+#include <tbb/blocked_range.h>
+#include <tbb/parallel_for.h>
+
+#include <atomic>
+#include <memory>
+
 namespace morphmap {
 
 VertexTets build_vertex_tets(const TetIndices& T, Eigen::Index vertex_count) {
@@ -21,22 +27,77 @@ SharedStars stars_or_build(const SharedStars& given, const TetIndices& T, Eigen:
   return std::make_shared<const VertexTets>(build_vertex_tets(T, vertex_count));
 }
 
+namespace {
+
+// Union-find on atomic parents. A root is linked only under a smaller root, and only while it is still a root (the
+// compare-and-swap expects it to point to itself), so every set ends with its smallest member as its root whatever
+// order the unions ran in. Path halving writes a grandparent over a parent, an ancestor either way, so a racing
+// find can only see a shorter path to the same root.
+class ConcurrentSets {
+ public:
+  explicit ConcurrentSets(Eigen::Index n) : parent_(new std::atomic<int>[std::size_t(n)]) {
+    tbb::parallel_for(tbb::blocked_range<Eigen::Index>(0, n), [&](const tbb::blocked_range<Eigen::Index>& r) {
+      for (Eigen::Index i = r.begin(); i != r.end(); ++i)
+        parent_[std::size_t(i)].store(int(i), std::memory_order_relaxed);
+    });
+  }
+  int find(int a) const {
+    for (;;) {
+      int p = parent_[std::size_t(a)].load(std::memory_order_relaxed);
+      if (p == a) return a;
+      const int grand = parent_[std::size_t(p)].load(std::memory_order_relaxed);
+      if (grand != p) parent_[std::size_t(a)].compare_exchange_weak(p, grand, std::memory_order_relaxed);
+      a = grand;
+    }
+  }
+  void unite(int a, int b) {
+    for (;;) {
+      a = find(a);
+      b = find(b);
+      if (a == b) return;
+      if (a < b) std::swap(a, b);
+      int expected = a;
+      if (parent_[std::size_t(a)].compare_exchange_strong(expected, b, std::memory_order_acq_rel)) return;
+    }
+  }
+
+ private:
+  std::unique_ptr<std::atomic<int>[]> parent_;
+};
+
+}  // namespace
+
+std::vector<int> component_labels(const TetIndices& T, Eigen::Index vertex_count,
+                                  const std::vector<std::uint8_t>* keep) {
+  ConcurrentSets sets(vertex_count);
+  tbb::parallel_for(tbb::blocked_range<Eigen::Index>(0, T.rows(), 4096),
+                    [&](const tbb::blocked_range<Eigen::Index>& r) {
+                      for (Eigen::Index t = r.begin(); t != r.end(); ++t) {
+                        if (keep != nullptr && !(*keep)[std::size_t(t)]) continue;
+                        for (int k = 1; k < 4; ++k) sets.unite(T(t, 0), T(t, k));
+                      }
+                    });
+  std::vector<int> label(static_cast<std::size_t>(vertex_count));
+  tbb::parallel_for(tbb::blocked_range<Eigen::Index>(0, vertex_count), [&](const tbb::blocked_range<Eigen::Index>& r) {
+    for (Eigen::Index v = r.begin(); v != r.end(); ++v) label[std::size_t(v)] = sets.find(int(v));
+  });
+  return label;
+}
+
 ComponentCensus component_census(const TetMesh4& mesh) {
   const Eigen::Index n = mesh.vertex_count();
-  DisjointSets sets(n);
-  for (Eigen::Index t = 0; t < mesh.tet_count(); ++t)
-    for (int k = 1; k < 4; ++k) sets.unite(mesh.T(t, 0), mesh.T(t, k));
+  const std::vector<int> root = component_labels(mesh.T, n);
   std::vector<std::uint8_t> touches(static_cast<std::size_t>(n), 0);  // per root: bit 1 A, bit 2 B
   std::vector<Eigen::Index> size(static_cast<std::size_t>(n), 0);
   for (Eigen::Index v = 0; v < n; ++v) {
-    const auto r = static_cast<std::size_t>(sets.find(v));
+    const auto r = static_cast<std::size_t>(root[std::size_t(v)]);
     ++size[r];
     if (mesh.side[std::size_t(v)] == VertexSide::A) touches[r] |= 1;
     if (mesh.side[std::size_t(v)] == VertexSide::B) touches[r] |= 2;
   }
   ComponentCensus c;
   for (Eigen::Index v = 0; v < n; ++v) {
-    if (sets.find(v) != v) continue;
+    if (root[std::size_t(v)] != v) continue;
     const std::size_t r = std::size_t(v);
     switch (touches[r]) {
       case 3:

@@ -58,6 +58,14 @@ class DisjointSets {
   std::vector<Eigen::Index> parent_;
 };
 
+/// The connected component of every vertex through the tets t with keep(t) (nullptr: every tet), as the smallest
+/// vertex index of the component: #V entries, a vertex in no kept tet its own component. Concurrent union-find
+/// over the tets: roots are linked only under smaller roots, by compare-and-swap, so the labels are the same for
+/// any thread count and schedule. (Serial, each of the two runs over cow -> horse's 1.7 M tets took 20 ms with a
+/// core idle.)
+std::vector<int> component_labels(const TetIndices& T, Eigen::Index vertex_count,
+                                  const std::vector<std::uint8_t>* keep = nullptr);
+
 /// Connected components of the 4D mesh (through shared vertices) by the ends of the morph they touch.
 struct ComponentCensus {
   std::int64_t through = 0;    ///< touch A and B: the map runs through them

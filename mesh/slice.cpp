@@ -2,6 +2,8 @@
 // are "slicing the 4D tetrahedral mesh with a hyperplane"), oriented by the mesh's cross4 convention.
 #include "mesh/slice.h"
 
+#include <tbb/parallel_for.h>
+
 #include <Eigen/Geometry>
 #include <algorithm>
 #include <array>
@@ -37,25 +39,42 @@ SliceMesh boundary_of(const TetMesh4& mesh, const Eigen::MatrixXd& labels, Verte
     throw InvalidInput(std::string(where) + ": side must have #V entries");
   auto on_side = [&](int v) { return mesh.side[static_cast<std::size_t>(v)] == side; };
 
+  // The tets are scanned in parallel chunks, each keeping its faces in tet order, concatenated in chunk order: the
+  // faces come out in tet order, as a serial scan lists them (serial, the scan was 13 ms of cow -> horse with a core
+  // idle, twice a run).
+  constexpr Eigen::Index kChunk = 1 << 16;
+  const Eigen::Index chunks = (mesh.tet_count() + kChunk - 1) / kChunk;
+  std::vector<std::vector<std::array<int, 3>>> chunk_faces(static_cast<std::size_t>(chunks));
+  std::vector<std::vector<int>> chunk_tets(static_cast<std::size_t>(chunks));
+  tbb::parallel_for(Eigen::Index(0), chunks, [&](Eigen::Index chunk) {
+    const Eigen::Index end = std::min(mesh.tet_count(), (chunk + 1) * kChunk);
+    for (Eigen::Index t = chunk * kChunk; t < end; ++t) {
+      std::array<int, 3> f{};
+      int n = 0;
+      for (int k = 0; k < 4; ++k)
+        if (on_side(mesh.T(t, k))) {
+          if (n < 3) f[static_cast<std::size_t>(n)] = mesh.T(t, k);
+          ++n;
+        }
+      if (n != 3) continue;  // four vertices on the boundary would be a flat tet: it has no single boundary face
+      const Eigen::Vector3d a = mesh.V.row(f[0]).head<3>();
+      const Eigen::Vector3d normal =
+          (Eigen::Vector3d(mesh.V.row(f[1]).head<3>()) - a).cross(Eigen::Vector3d(mesh.V.row(f[2]).head<3>()) - a);
+      if (normal.dot(outward_of_tet(mesh, t)) < 0.0) std::swap(f[1], f[2]);
+      chunk_faces[static_cast<std::size_t>(chunk)].push_back(f);
+      chunk_tets[static_cast<std::size_t>(chunk)].push_back(int(t));
+    }
+  });
   std::vector<std::array<int, 3>> faces;
   std::vector<int> source_tet;
   std::vector<char> used(static_cast<std::size_t>(nv), 0);
-  for (Eigen::Index t = 0; t < mesh.tet_count(); ++t) {
-    std::array<int, 3> f{};
-    int n = 0;
-    for (int k = 0; k < 4; ++k)
-      if (on_side(mesh.T(t, k))) {
-        if (n < 3) f[static_cast<std::size_t>(n)] = mesh.T(t, k);
-        ++n;
-      }
-    if (n != 3) continue;  // four vertices on the boundary would be a flat tet: it has no single boundary face
-    const Eigen::Vector3d a = mesh.V.row(f[0]).head<3>();
-    const Eigen::Vector3d normal =
-        (Eigen::Vector3d(mesh.V.row(f[1]).head<3>()) - a).cross(Eigen::Vector3d(mesh.V.row(f[2]).head<3>()) - a);
-    if (normal.dot(outward_of_tet(mesh, t)) < 0.0) std::swap(f[1], f[2]);
-    for (const int v : f) used[static_cast<std::size_t>(v)] = 1;
-    faces.push_back(f);
-    source_tet.push_back(int(t));
+  for (Eigen::Index chunk = 0; chunk < chunks; ++chunk) {
+    for (const std::array<int, 3>& f : chunk_faces[static_cast<std::size_t>(chunk)]) {
+      for (const int v : f) used[static_cast<std::size_t>(v)] = 1;
+      faces.push_back(f);
+    }
+    const std::vector<int>& tets = chunk_tets[static_cast<std::size_t>(chunk)];
+    source_tet.insert(source_tet.end(), tets.begin(), tets.end());
   }
 
   // Compact numbering in ascending mesh vertex id, so the result does not depend on tet order.

@@ -268,18 +268,12 @@ DirichletSystem dirichlet_system(const TetMesh4& mesh, const SharedStars& stars,
   {
     // Components through tets that carry stiffness only: a vertex held by degenerate tets alone would have
     // an empty row in K, so it must count as its own (floating) component.
-    DisjointSets sets(n);
-    for (Eigen::Index t = 0; t < T.rows(); ++t) {
-      if (!has_stiffness[static_cast<std::size_t>(t)]) continue;
-      for (int k = 1; k < 4; ++k) sets.unite(T(t, 0), T(t, k));
-    }
-    std::vector<Eigen::Index> root(static_cast<std::size_t>(n));
+    const std::vector<int> root = component_labels(T, n, &has_stiffness);
     std::vector<char> anchored(static_cast<std::size_t>(n), 0);  // per root: touches A or B
     std::vector<double> time_sum(static_cast<std::size_t>(n), 0.0);
     std::vector<Eigen::Index> size(static_cast<std::size_t>(n), 0);
     for (Eigen::Index i = 0; i < n; ++i) {
-      const auto r = static_cast<std::size_t>(sets.find(i));
-      root[static_cast<std::size_t>(i)] = static_cast<Eigen::Index>(r);
+      const auto r = static_cast<std::size_t>(root[static_cast<std::size_t>(i)]);
       if (mesh.side[static_cast<std::size_t>(i)] != VertexSide::Interior) anchored[r] = 1;
       time_sum[r] += mesh.time_of(i);
       ++size[r];

@@ -2,6 +2,9 @@
 #include "mesh/adjacency.h"
 
 #include <gtest/gtest.h>
+#include <tbb/global_control.h>
+
+#include <algorithm>
 
 #include "tests/mesh/product_mesh.h"
 
@@ -49,6 +52,40 @@ TEST(Adjacency, CensusTellsBornAndVanishingComponentsApart) {
   EXPECT_EQ(c.vanishing, 1);
   EXPECT_EQ(c.vanishing_vertices, 18);
   EXPECT_EQ(c.floating, 0);
+}
+
+
+// The concurrent labels against a serial union-find, with some tets left out (so that components split), on one
+// thread and on all: every vertex labelled with the smallest vertex of its component.
+TEST(Adjacency, ComponentLabelsAreEachComponentsSmallestVertexOnAnyThreadCount) {
+  TetMesh4 mesh = with_component(product_mesh(icosphere(2), 6, 1.0), product_mesh(octahedron(), 2, 0.5), 0.5,
+                                 VertexSide::B);
+  // Reverse the tet order so that unions do not arrive in vertex order.
+  mesh.T = mesh.T.colwise().reverse().eval();
+  std::vector<std::uint8_t> keep(static_cast<std::size_t>(mesh.tet_count()), 1);
+  for (Eigen::Index t = 0; t < mesh.tet_count(); t += 3) keep[std::size_t(t)] = 0;
+  const std::vector<std::uint8_t>* const masks[] = {nullptr, &keep};
+  for (const std::vector<std::uint8_t>* mask : masks) {
+    DisjointSets serial(mesh.vertex_count());
+    for (Eigen::Index t = 0; t < mesh.tet_count(); ++t) {
+      if (mask != nullptr && !(*mask)[std::size_t(t)]) continue;
+      for (int k = 1; k < 4; ++k) serial.unite(mesh.T(t, 0), mesh.T(t, k));
+    }
+    std::vector<int> expected(static_cast<std::size_t>(mesh.vertex_count()));
+    for (Eigen::Index v = 0; v < mesh.vertex_count(); ++v) expected[std::size_t(v)] = int(serial.find(v));
+    const std::vector<int> all_threads = component_labels(mesh.T, mesh.vertex_count(), mask);
+    std::vector<int> one_thread;
+    {
+      tbb::global_control one(tbb::global_control::max_allowed_parallelism, 1);
+      one_thread = component_labels(mesh.T, mesh.vertex_count(), mask);
+    }
+    EXPECT_EQ(all_threads, expected);
+    EXPECT_EQ(one_thread, expected);
+    // More than one component, so the test would see labels merged across them.
+    std::vector<int> roots = expected;
+    std::sort(roots.begin(), roots.end());
+    EXPECT_GT(std::unique(roots.begin(), roots.end()) - roots.begin(), mask != nullptr ? 2 : 1);
+  }
 }
 
 }  // namespace
