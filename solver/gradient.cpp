@@ -77,10 +77,9 @@ GradientResult compute_gradient(const TetMesh4& mesh, const Eigen::VectorXd& s, 
   result.tet_volume.resize(tets);
   tbb::parallel_for(Eigen::Index(0), tets, [&](Eigen::Index t) {
     Eigen::Matrix<double, 4, 3> E;
-    Eigen::Matrix3d gram_inverse;
     double volume = 0.0;
     // Degenerate tets have no hull to take a gradient in: zero gradient, zero weight.
-    if (!tet_frame(V, T, t, E, gram_inverse, volume)) {
+    if (!tet_frame(V, T, t, E, volume)) {
       result.tet_gradient.row(t).setZero();
       result.tet_volume(t) = 0.0;
       return;

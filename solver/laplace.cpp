@@ -182,10 +182,9 @@ void assemble_rows(const TetIndices& T, const VertexTets& stars, const PackedSti
   });
 }
 
-}  // namespace
-
-bool tet_frame(const Points4& V, const TetIndices& T, Eigen::Index t, Eigen::Matrix<double, 4, 3>& E,
-               Eigen::Matrix3d& gram_inverse, double& volume) {
+// tet_frame, the Gram inverse only when asked for (the gradient stage reads E and the volume alone).
+bool frame_of(const Points4& V, const TetIndices& T, Eigen::Index t, Eigen::Matrix<double, 4, 3>& E,
+              Eigen::Matrix3d* gram_inverse, double& volume) {
   const Eigen::Vector4d v0 = V.row(T(t, 0)).transpose();
   for (int k = 0; k < 3; ++k) E.col(k) = V.row(T(t, k + 1)).transpose() - v0;
   const Eigen::Matrix3d gram = E.transpose() * E;
@@ -196,9 +195,20 @@ bool tet_frame(const Points4& V, const TetIndices& T, Eigen::Index t, Eigen::Mat
     volume = 0.0;
     return false;
   }
-  gram_inverse = gram.inverse();
+  if (gram_inverse != nullptr) *gram_inverse = gram.inverse();
   volume = std::sqrt(det) / 6.0;
   return true;
+}
+
+}  // namespace
+
+bool tet_frame(const Points4& V, const TetIndices& T, Eigen::Index t, Eigen::Matrix<double, 4, 3>& E,
+               Eigen::Matrix3d& gram_inverse, double& volume) {
+  return frame_of(V, T, t, E, &gram_inverse, volume);
+}
+
+bool tet_frame(const Points4& V, const TetIndices& T, Eigen::Index t, Eigen::Matrix<double, 4, 3>& E, double& volume) {
+  return frame_of(V, T, t, E, nullptr, volume);
 }
 
 void barycentric_gradients(const Points4& V, const TetIndices& T, Eigen::MatrixXd& G, Eigen::VectorXd& vol) {

@@ -20,6 +20,8 @@ namespace morphmap {
 /// has no usable hull and every stage skips it.
 bool tet_frame(const Points4& V, const TetIndices& T, Eigen::Index t, Eigen::Matrix<double, 4, 3>& E,
                Eigen::Matrix3d& gram_inverse, double& volume);
+/// tet_frame without the Gram inverse: E and the volume, and the same answer for degenerate tets.
+bool tet_frame(const Points4& V, const TetIndices& T, Eigen::Index t, Eigen::Matrix<double, 4, 3>& E, double& volume);
 
 /// Barycentric gradients and volumes of every tet, computed in the tet's own 3D hull from the Gram
 /// matrix of its edge vectors (no 3D embedding needed).

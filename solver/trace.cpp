@@ -104,7 +104,8 @@ __attribute__((always_inline)) inline bool simplex_system(const TetMesh4& mesh, 
     }
   }
   x.variation = 2.0 * std::sqrt(largest_gradient2) * std::sqrt(spread2);
-  return x.G.allFinite() && x.T.allFinite();
+  // T needs no test: the vertex field is finite (checked on entry) and so is its smoothing (unit vectors averaged).
+  return x.G.allFinite();
 }
 
 template <bool kFlow>
@@ -258,6 +259,9 @@ class Tracer {
     std::array<int, 4> before_last{{-2, -2, -2, -2}}, last{{-2, -2, -2, -2}};
     double s_checkpoint = 0.0;
     int from_tet = -1;  // the tet the last piece crossed, when it ended on one of its faces
+    // One simplex a trace, not one a piece: choose() writes every member it reads (zeroing and copying its 424 bytes
+    // a piece was a tenth of the tracer's instructions with the copies below).
+    Simplex piece;
     for (int step = 0;; ++step) {
       if (on_a(ids, n)) return TraceStatus::Reached;
       if (step >= options_.max_steps) return TraceStatus::Stalled;
@@ -271,7 +275,6 @@ class Tracer {
       }
       before_last = last;
       last = key;
-      Simplex piece;
       Weights pw;
       Weights rate;
       if (!choose(ids, w, n, from_tet, piece, pw, rate, stats)) return TraceStatus::Stalled;
@@ -502,6 +505,24 @@ class Tracer {
     }
   }
 
+  // The weight system of tet t through the face ids[0..3) into x, as simplices_holding<true>(ids, 3, {t}, 4, ...)
+  // builds it (the face first, then t's fourth vertex), without its subset enumeration and copies; false when t
+  // has no system, or does not hold the face by exactly one vertex more (never, for a tet across a face).
+  bool tet_through_face(const std::array<int, 4>& ids, int t, Simplex& x) const {
+    int other = -1;
+    for (int k = 0; k < 4; ++k) {
+      const int v = mesh_.T(t, k);
+      if (among(ids, 3, v)) continue;
+      if (other >= 0) return false;
+      other = v;
+    }
+    if (other < 0) return false;
+    x.size = 4;
+    x.tet = t;
+    x.ids = {{ids[0], ids[1], ids[2], other}};
+    return simplex_system<3, true>(mesh_, field_, normals_, x);
+  }
+
   // Calls visit(x) for every simplex x of `size` vertices that holds the support (ids[0..n) first in x.ids, in that
   // order) and has a weight system (kFlow: that of the flow, else the weight gradients only; see simplex_system):
   // sub-simplices of the candidate tets, each face or edge once, in candidate order.
@@ -615,13 +636,18 @@ class Tracer {
       // that one is tried alone first, and from_tet only if it fails (where both are feasible, in a star folded
       // over its normal, the one across now wins instead of the better aligned). A fifth fewer weight systems
       // on cow -> horse.
-      thread_local std::vector<int> one;
-      one.assign(1, candidates[0] == from_tet ? candidates[1] : candidates[0]);
-      simplices_holding<true>(ids, n, one, 4, visit);
-      if (found) return true;
-      one.assign(1, from_tet);
-      simplices_holding<true>(ids, n, one, 4, visit);
-      if (found) return true;
+      // Each tet is built straight into `best` (what visit() would copy there when it is feasible; alone, it needs
+      // no alignment to beat).
+      auto enter = [&](int t) {
+        if (!tet_through_face(ids, t, best)) return false;
+        const Weights r = rates(best, xw);
+        ++stats.evaluations;
+        if (!feasible(r, 4, n)) return false;
+        best_w = xw;
+        best_r = r;
+        return found = true;
+      };
+      if (enter(candidates[0] == from_tet ? candidates[1] : candidates[0]) || enter(from_tet)) return true;
       simplices_holding<true>(ids, n, candidates, 3, visit);
       return found;
     }
