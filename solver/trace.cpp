@@ -286,8 +286,9 @@ class Tracer {
   }
 
   static std::array<int, 4> support_key(const std::array<int, 4>& ids, int n) {
-    std::array<int, 4> key{{-1, -1, -1, -1}};
-    for (int k = 0; k < n; ++k) key[std::size_t(k)] = ids[std::size_t(k)];
+    // A fixed trip count: a loop to n was a call to memcpy a piece.
+    std::array<int, 4> key;
+    for (int k = 0; k < 4; ++k) key[std::size_t(k)] = k < n ? ids[std::size_t(k)] : -1;
     for (int i = 1; i < n; ++i)  // insertion sort of at most 4 ids
       for (int j = i; j > 0 && key[std::size_t(j - 1)] > key[std::size_t(j)]; --j)
         std::swap(key[std::size_t(j - 1)], key[std::size_t(j)]);
@@ -611,8 +612,8 @@ class Tracer {
     if (!(d2 > 0.0)) return false;
     thread_local std::vector<int> candidates;
     support_tets(ids, n, from_tet, candidates);
-    Weights xw = Weights::Zero();
-    for (int k = 0; k < n; ++k) xw(k) = w[std::size_t(k)];
+    Weights xw;
+    for (int k = 0; k < 4; ++k) xw(k) = k < n ? w[std::size_t(k)] : 0.0;  // fixed trip count, as in support_key
     auto visit = [&](const Simplex& x) {
       const Weights r = rates(x, xw);
       ++stats.evaluations;
