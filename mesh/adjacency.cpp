@@ -3,7 +3,9 @@
 
 #include <tbb/blocked_range.h>
 #include <tbb/parallel_for.h>
+#include <tbb/parallel_reduce.h>
 
+#include <algorithm>
 #include <atomic>
 #include <memory>
 
@@ -82,6 +84,64 @@ std::vector<int> component_labels(const TetIndices& T, Eigen::Index vertex_count
     for (Eigen::Index v = r.begin(); v != r.end(); ++v) label[std::size_t(v)] = sets.find(int(v));
   });
   return label;
+}
+
+FaceNeighbours face_neighbours(const TetIndices& T, const VertexTets& stars) {
+  FaceNeighbours result;
+  const Eigen::Index tets = T.rows();
+  const bool repeats = tbb::parallel_reduce(
+      tbb::blocked_range<Eigen::Index>(0, tets), false,
+      [&](const tbb::blocked_range<Eigen::Index>& r, bool found) {
+        for (Eigen::Index t = r.begin(); t != r.end() && !found; ++t)
+          for (int i = 0; i < 4; ++i)
+            for (int j = i + 1; j < 4; ++j) found = found || T(t, i) == T(t, j);
+        return found;
+      },
+      [](bool a, bool b) { return a || b; });
+  if (repeats) return result;
+  // Not zeroed: every entry is written below (each face of a tet with four distinct vertices has a smallest one).
+  result.across.reset(new int[std::size_t(tets) * 4]);
+  struct FaceUse {
+    int b, c;  // the face's vertices other than v, b < c
+    int tet;
+    int slot;  // the position in the tet's row of its vertex opposite the face
+  };
+  const Eigen::Index vertices = Eigen::Index(stars.offset.size()) - 1;
+  tbb::parallel_for(tbb::blocked_range<Eigen::Index>(0, vertices, 512), [&](const tbb::blocked_range<Eigen::Index>& r) {
+    std::vector<FaceUse> uses;
+    for (Eigen::Index v = r.begin(); v != r.end(); ++v) {
+      uses.clear();
+      for (std::int64_t j = stars.first(int(v)); j < stars.last(int(v)); ++j) {
+        const int t = stars.tet(j);
+        const int row[4] = {T(t, 0), T(t, 1), T(t, 2), T(t, 3)};
+        for (int k = 0; k < 4; ++k) {
+          if (row[k] == v) continue;  // the face opposite v does not hold it
+          int other[2] = {-1, -1}, m = 0;
+          bool smallest = true;
+          for (int i = 0; i < 4; ++i) {
+            if (i == k || row[i] == v) continue;
+            smallest = smallest && row[i] > v;
+            other[m++] = row[i];
+          }
+          if (smallest) uses.push_back({std::min(other[0], other[1]), std::max(other[0], other[1]), t, k});
+        }
+      }
+      std::sort(uses.begin(), uses.end(), [](const FaceUse& x, const FaceUse& y) {
+        return x.b != y.b ? x.b < y.b : x.c != y.c ? x.c < y.c : x.tet < y.tet;
+      });
+      for (std::size_t a = 0; a < uses.size();) {
+        std::size_t e = a + 1;
+        while (e < uses.size() && uses[e].b == uses[a].b && uses[e].c == uses[a].c) ++e;
+        for (std::size_t i = a; i < e; ++i)
+          result.across[std::size_t(uses[i].tet) * 4 + std::size_t(uses[i].slot)] = e - a == 1 ? FaceNeighbours::kNoTet
+                                                                                    : e - a == 2
+                                                                                        ? uses[i == a ? a + 1 : a].tet
+                                                                                        : FaceNeighbours::kManyTets;
+        a = e;
+      }
+    }
+  });
+  return result;
 }
 
 ComponentCensus component_census(const TetMesh4& mesh) {

@@ -66,6 +66,22 @@ class DisjointSets {
 std::vector<int> component_labels(const TetIndices& T, Eigen::Index vertex_count,
                                   const std::vector<std::uint8_t>* keep = nullptr);
 
+/// The tet across every face of every tet: across[4 t + k] is the tet that shares t's face opposite T(t, k), what a
+/// search of the three face vertices' stars finds: kNoTet where t alone holds the face (the mesh's boundary),
+/// kManyTets where more than two tets hold it.
+struct FaceNeighbours {
+  static constexpr int kNoTet = -1, kManyTets = -3;
+  std::unique_ptr<int[]> across;  ///< #T * 4 entries; null when a tet repeats a vertex (its faces are not three
+                                  ///< distinct vertices), and then nothing is known
+  bool known() const { return across != nullptr; }
+};
+
+/// Every face is settled once, by its smallest vertex v, from v's star: the faces of its tets that hold v and no
+/// smaller vertex, sorted by their other two vertices so that equal faces meet; every entry is written by one vertex,
+/// so the result does not depend on the thread count. Written by hand (no library has face adjacency of a
+/// tetrahedral mesh in R^4 from vertex stars).
+FaceNeighbours face_neighbours(const TetIndices& T, const VertexTets& stars);
+
 /// Connected components of the 4D mesh (through shared vertices) by the ends of the morph they touch.
 struct ComponentCensus {
   std::int64_t through = 0;    ///< touch A and B: the map runs through them

@@ -14,7 +14,6 @@
 
 #include <Eigen/Dense>
 #include <algorithm>
-#include <atomic>
 #include <chrono>
 #include <limits>
 #include <numeric>
@@ -214,13 +213,7 @@ class Tracer {
         stars_(stars_or_build(stars, mesh.T, mesh.vertex_count())),
         adj_(*stars_),
         normals_(vertex_normals(mesh, adj_)),
-        across_(new std::atomic<int>[std::size_t(mesh.tet_count()) * 4]) {
-    // In parallel: the first write to 27 MB on cow -> horse (first writes cost most on these virtual machines).
-    tbb::parallel_for(tbb::blocked_range<std::size_t>(0, std::size_t(mesh.tet_count()) * 4),
-                      [&](const tbb::blocked_range<std::size_t>& r) {
-                        for (std::size_t i = r.begin(); i < r.end(); ++i)
-                          across_[i].store(kUnknown, std::memory_order_relaxed);
-                      });
+        across_(face_neighbours(mesh.T, adj_)) {
     field_ = field;
     for (int pass = 0; pass < options.field_smoothing; ++pass) field_ = smooth_field(mesh, adj_, field_);
   }
@@ -422,23 +415,16 @@ class Tracer {
   }
 
   // The tets holding the support, in increasing index. On a face of from_tet (the common case: a piece ended on
-  // a face of its tet) they are from_tet and its neighbour across that face, cached per (tet, face).
+  // a face of its tet) they are from_tet and its neighbour across that face (face_neighbours), else the stars'
+  // intersection.
   void support_tets(const std::array<int, 4>& ids, int n, int from_tet, std::vector<int>& out) const {
     out.clear();
     if (n == 3 && from_tet >= 0) {
       int k = 0;
       while (k < 4 && among(ids, 3, mesh_.T(from_tet, k))) ++k;
-      if (k < 4) {
-        std::atomic<int>& slot = across_[std::size_t(from_tet) * 4 + std::size_t(k)];
-        int other = slot.load(std::memory_order_relaxed);
-        if (other == kUnknown) {
-          // Any thread computes the same value: storing it twice is harmless.
-          star_intersection(ids, n, out);
-          other = out.size() == 1 ? kNone : out.size() == 2 ? (out[0] == from_tet ? out[1] : out[0]) : kMany;
-          slot.store(other, std::memory_order_relaxed);
-          return;
-        }
-        if (other != kMany) {
+      if (k < 4 && across_.known()) {
+        const int other = across_.across[std::size_t(from_tet) * 4 + std::size_t(k)];
+        if (other != FaceNeighbours::kManyTets) {
           out.push_back(from_tet);
           if (other >= 0) out.insert(other < from_tet ? out.begin() : out.end(), other);
           return;
@@ -746,10 +732,10 @@ class Tracer {
   SharedStars stars_;
   const VertexTets& adj_;
   Points4 normals_;  // #V by 4 unit vertex normals
-  // #T by 4: the tet across the face opposite each tet vertex (kNone on the boundary, kMany where more than two
-  // tets share the face), filled as traces cross faces.
-  static constexpr int kUnknown = -2, kNone = -1, kMany = -3;
-  std::unique_ptr<std::atomic<int>[]> across_;
+  // The tet across each face, found up front for every face (face_neighbours): before 2026-12-07 the tracer searched
+  // three vertex stars for a face the first time a trace crossed it, 1.31 M searches on cow -> horse (56% of its
+  // face crossings, 5% of the run), where settling all 3.3 M faces from the stars takes a fraction of that.
+  const FaceNeighbours across_;
 };
 
 }  // namespace

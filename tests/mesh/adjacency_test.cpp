@@ -54,12 +54,11 @@ TEST(Adjacency, CensusTellsBornAndVanishingComponentsApart) {
   EXPECT_EQ(c.floating, 0);
 }
 
-
 // The concurrent labels against a serial union-find, with some tets left out (so that components split), on one
 // thread and on all: every vertex labelled with the smallest vertex of its component.
 TEST(Adjacency, ComponentLabelsAreEachComponentsSmallestVertexOnAnyThreadCount) {
-  TetMesh4 mesh = with_component(product_mesh(icosphere(2), 6, 1.0), product_mesh(octahedron(), 2, 0.5), 0.5,
-                                 VertexSide::B);
+  TetMesh4 mesh =
+      with_component(product_mesh(icosphere(2), 6, 1.0), product_mesh(octahedron(), 2, 0.5), 0.5, VertexSide::B);
   // Reverse the tet order so that unions do not arrive in vertex order.
   mesh.T = mesh.T.colwise().reverse().eval();
   std::vector<std::uint8_t> keep(static_cast<std::size_t>(mesh.tet_count()), 1);
@@ -86,6 +85,51 @@ TEST(Adjacency, ComponentLabelsAreEachComponentsSmallestVertexOnAnyThreadCount) 
     std::sort(roots.begin(), roots.end());
     EXPECT_GT(std::unique(roots.begin(), roots.end()) - roots.begin(), mask != nullptr ? 2 : 1);
   }
+}
+
+// Every face's neighbour against a search of all tets for the face's three vertices: on a mesh with a boundary (the
+// product's ends) and two components, with one tet doubled (its faces then held by three tets: kManyTets), on one
+// thread and on all; a tet that repeats a vertex leaves nothing known.
+TEST(Adjacency, FaceNeighboursAreWhatASearchOfEveryTetFinds) {
+  TetMesh4 mesh =
+      with_component(product_mesh(icosphere(1), 3, 1.0), product_mesh(octahedron(), 2, 0.5), 0.5, VertexSide::B);
+  const Eigen::Index doubled = 7;
+  mesh.T.conservativeResize(mesh.T.rows() + 1, 4);
+  mesh.T.row(mesh.T.rows() - 1) = mesh.T.row(doubled).reverse();
+  const VertexTets stars = build_vertex_tets(mesh.T, mesh.vertex_count());
+  const FaceNeighbours all = face_neighbours(mesh.T, stars);
+  FaceNeighbours one;
+  {
+    tbb::global_control single(tbb::global_control::max_allowed_parallelism, 1);
+    one = face_neighbours(mesh.T, stars);
+  }
+  ASSERT_TRUE(all.known());
+  ASSERT_TRUE(one.known());
+  int boundary = 0, many = 0;
+  for (Eigen::Index t = 0; t < mesh.tet_count(); ++t)
+    for (int k = 0; k < 4; ++k) {
+      std::vector<int> holders;
+      for (Eigen::Index u = 0; u < mesh.tet_count(); ++u) {
+        int shared = 0;
+        for (int i = 0; i < 4; ++i)
+          if (i != k) shared += (mesh.T.row(u).array() == mesh.T(t, i)).any() ? 1 : 0;
+        if (shared == 3) holders.push_back(int(u));
+      }
+      int expected = FaceNeighbours::kManyTets;
+      if (holders.size() == 1) expected = FaceNeighbours::kNoTet;
+      if (holders.size() == 2) expected = holders[0] == t ? holders[1] : holders[0];
+      boundary += expected == FaceNeighbours::kNoTet ? 1 : 0;
+      many += expected == FaceNeighbours::kManyTets ? 1 : 0;
+      EXPECT_EQ(all.across[std::size_t(t) * 4 + std::size_t(k)], expected) << "tet " << t << " face " << k;
+      EXPECT_EQ(one.across[std::size_t(t) * 4 + std::size_t(k)], expected) << "tet " << t << " face " << k;
+    }
+  EXPECT_GT(boundary, 0);
+  // The doubled tet's faces inside the mesh are held by three tets (it, its copy and the one across), each seeing
+  // kManyTets.
+  EXPECT_EQ(many, 3 * 4);
+
+  mesh.T(0, 1) = mesh.T(0, 0);
+  EXPECT_FALSE(face_neighbours(mesh.T, build_vertex_tets(mesh.T, mesh.vertex_count())).known());
 }
 
 }  // namespace
