@@ -102,7 +102,7 @@ FaceNeighbours face_neighbours(const TetIndices& T, const VertexTets& stars) {
   // Not zeroed: every entry is written below (each face of a tet with four distinct vertices has a smallest one).
   result.across.reset(new int[std::size_t(tets) * 4]);
   struct FaceUse {
-    int b, c;  // the face's vertices other than v, b < c
+    std::uint64_t face;  // the face's vertices other than v, b < c, as (b << 32) | c: equal faces meet in a sort
     int tet;
     int slot;  // the position in the tet's row of its vertex opposite the face
   };
@@ -123,15 +123,17 @@ FaceNeighbours face_neighbours(const TetIndices& T, const VertexTets& stars) {
             smallest = smallest && row[i] > v;
             other[m++] = row[i];
           }
-          if (smallest) uses.push_back({std::min(other[0], other[1]), std::max(other[0], other[1]), t, k});
+          if (!smallest) continue;
+          const std::uint64_t b = std::uint64_t(std::min(other[0], other[1]));
+          const std::uint64_t c = std::uint64_t(std::max(other[0], other[1]));
+          uses.push_back({(b << 32) | c, t, k});
         }
       }
-      std::sort(uses.begin(), uses.end(), [](const FaceUse& x, const FaceUse& y) {
-        return x.b != y.b ? x.b < y.b : x.c != y.c ? x.c < y.c : x.tet < y.tet;
-      });
+      // Within a face the order does not matter: two tets see each other, more all see kManyTets.
+      std::sort(uses.begin(), uses.end(), [](const FaceUse& x, const FaceUse& y) { return x.face < y.face; });
       for (std::size_t a = 0; a < uses.size();) {
         std::size_t e = a + 1;
-        while (e < uses.size() && uses[e].b == uses[a].b && uses[e].c == uses[a].c) ++e;
+        while (e < uses.size() && uses[e].face == uses[a].face) ++e;
         for (std::size_t i = a; i < e; ++i)
           result.across[std::size_t(uses[i].tet) * 4 + std::size_t(uses[i].slot)] = e - a == 1 ? FaceNeighbours::kNoTet
                                                                                     : e - a == 2
