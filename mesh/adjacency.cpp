@@ -24,6 +24,22 @@ VertexTets build_vertex_tets(const TetIndices& T, Eigen::Index vertex_count) {
   return adj;
 }
 
+std::pair<int, int> index_range(const TetIndices& T) {
+  if (T.size() == 0) return {0, -1};
+  using Range = std::pair<int, int>;
+  return tbb::parallel_reduce(
+      tbb::blocked_range<Eigen::Index>(0, T.rows(), 1 << 16), Range(T(0, 0), T(0, 0)),
+      [&](const tbb::blocked_range<Eigen::Index>& r, Range range) {
+        for (Eigen::Index t = r.begin(); t != r.end(); ++t)
+          for (int k = 0; k < 4; ++k) {
+            range.first = std::min(range.first, T(t, k));
+            range.second = std::max(range.second, T(t, k));
+          }
+        return range;
+      },
+      [](const Range& a, const Range& b) { return Range(std::min(a.first, b.first), std::max(a.second, b.second)); });
+}
+
 SharedStars stars_or_build(const SharedStars& given, const TetIndices& T, Eigen::Index vertex_count) {
   if (given) return given;
   return std::make_shared<const VertexTets>(build_vertex_tets(T, vertex_count));

@@ -59,8 +59,7 @@ void check_input(const TetMesh4& mesh, const QualityOptions& options) {
   }
   if (mesh.V.size() > 0 && !mesh.V.allFinite()) throw InvalidInput("measure_quality: non-finite vertex coordinate");
   if (mesh.T.size() == 0) return;
-  const int lo = mesh.T.minCoeff();
-  const int hi = mesh.T.maxCoeff();
+  const auto [lo, hi] = index_range(mesh.T);
   if (lo < 0 || hi >= mesh.V.rows()) {
     std::ostringstream msg;
     msg << "measure_quality: tet vertex index " << (lo < 0 ? lo : hi) << " outside [0, " << mesh.V.rows() << ")";

@@ -66,7 +66,7 @@ GradientResult compute_gradient(const TetMesh4& mesh, const Eigen::VectorXd& s, 
     msg << "compute_gradient: s has " << s.size() << " entries for " << n << " vertices";
     throw InvalidInput(msg.str());
   }
-  if (tets > 0 && (T.minCoeff() < 0 || T.maxCoeff() >= n)) {
+  if (const auto [lo, hi] = index_range(T); tets > 0 && (lo < 0 || hi >= n)) {
     throw InvalidInput("compute_gradient: tet vertex index out of range");
   }
 

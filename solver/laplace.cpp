@@ -42,8 +42,7 @@ void check_mesh_arrays(const Points4& V, const TetIndices& T, const char* who) {
     throw InvalidInput(msg.str());
   }
   if (T.size() == 0) return;
-  const int lo = T.minCoeff();
-  const int hi = T.maxCoeff();
+  const auto [lo, hi] = index_range(T);
   if (lo < 0 || hi >= V.rows()) {
     std::ostringstream msg;
     msg << who << ": tet vertex index " << (lo < 0 ? lo : hi) << " outside [0, " << V.rows() << ")";

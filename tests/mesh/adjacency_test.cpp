@@ -132,5 +132,19 @@ TEST(Adjacency, FaceNeighboursAreWhatASearchOfEveryTetFinds) {
   EXPECT_FALSE(face_neighbours(mesh.T, build_vertex_tets(mesh.T, mesh.vertex_count())).known());
 }
 
+TEST(Adjacency, IndexRangeIsTheSmallestAndLargestIndex) {
+  TetIndices T(200000, 4);
+  for (Eigen::Index t = 0; t < T.rows(); ++t)
+    for (int k = 0; k < 4; ++k) T(t, k) = int((t * 7919 + k * 104729) % 1000003) + 5;
+  T(123456, 2) = 3;
+  T(7, 0) = 2000000;
+  const std::pair<int, int> range = index_range(T);
+  EXPECT_EQ(range.first, T.minCoeff());
+  EXPECT_EQ(range.second, T.maxCoeff());
+  EXPECT_EQ(range.first, 3);
+  EXPECT_EQ(range.second, 2000000);
+  EXPECT_EQ(index_range(TetIndices(0, 4)), std::make_pair(0, -1));
+}
+
 }  // namespace
 }  // namespace morphmap
