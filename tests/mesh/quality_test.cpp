@@ -219,6 +219,56 @@ TEST(QualityDegenerate, FlatTetIsCountedAndLeftOutWithoutNaN) {
   EXPECT_EQ(histogram_total(f), 0);
 }
 
+// The histogram against dihedral angles computed here from face normals in 3D, over 2000 random tets and bin counts
+// whose edges lie from far apart (7) to closer together than the bin table's cells near 0 and 180 degrees (1000):
+// every dihedral binned where its angle falls. Angles within 1e-7 degrees of a bin edge are not drawn.
+TEST(QualityRandomTets, HistogramBinsEveryDihedralWhereItsAngleFalls) {
+  std::mt19937 rng(11);
+  std::uniform_real_distribution<double> coordinate(-1.0, 1.0);
+  std::vector<Eigen::Vector3d> points;
+  std::vector<std::array<int, 4>> tets;
+  std::vector<double> angles;  // six a tet
+  while (tets.size() < 2000) {
+    std::array<Eigen::Vector3d, 4> p;
+    for (auto& q : p) q = Eigen::Vector3d(coordinate(rng), coordinate(rng), coordinate(rng));
+    if (std::abs((p[1] - p[0]).dot((p[2] - p[0]).cross(p[3] - p[0]))) < 1e-3) continue;
+    std::vector<double> six;
+    for (int a = 0; a < 4; ++a)
+      for (int b = a + 1; b < 4; ++b) {
+        // The dihedral at edge ab, between the faces through ab and each of the other two vertices.
+        int c = 0;
+        while (c == a || c == b) ++c;
+        int d = 0;
+        while (d == a || d == b || d == c) ++d;
+        const Eigen::Vector3d e = (p[b] - p[a]).normalized();
+        Eigen::Vector3d u = p[c] - p[a], v = p[d] - p[a];
+        u -= u.dot(e) * e;
+        v -= v.dot(e) * e;
+        six.push_back(degrees(std::acos(std::clamp(u.normalized().dot(v.normalized()), -1.0, 1.0))));
+      }
+    bool near_edge = false;
+    for (const int bins : {7, 18, 1000})
+      for (const double angle : six) {
+        const double x = angle * bins / 180.0;
+        near_edge = near_edge || std::abs(x - std::round(x)) * 180.0 / bins < 1e-7;
+      }
+    if (near_edge) continue;
+    const int base = int(points.size());
+    for (const auto& q : p) points.push_back(q);
+    tets.push_back({base, base + 1, base + 2, base + 3});
+    angles.insert(angles.end(), six.begin(), six.end());
+  }
+  const TetMesh4 mesh = embedded_mesh(points, tets, 5);
+  for (const int bins : {7, 18, 1000}) {
+    QualityOptions options;
+    options.histogram_bins = bins;
+    const QualityResult r = measure_quality(mesh, options);
+    std::vector<std::int64_t> expected(std::size_t(bins), 0);
+    for (const double angle : angles) ++expected[std::size_t(std::min(bins - 1, int(angle * bins / 180.0)))];
+    EXPECT_EQ(r.dihedral_histogram, expected) << bins << " bins";
+  }
+}
+
 TEST(QualityInput, RejectsBadIndicesAndOptions) {
   TetMesh4 mesh = embedded_mesh({{0, 0, 0}, {1, 0, 0}, {0, 1, 0}, {0, 0, 1}}, {{0, 1, 2, 3}}, 31);
   QualityOptions no_bins;
