@@ -4,6 +4,7 @@
 #include <tbb/blocked_range.h>
 #include <tbb/parallel_for.h>
 #include <tbb/parallel_reduce.h>
+#include <tbb/task_arena.h>
 
 #include <algorithm>
 #include <atomic>
@@ -12,15 +13,53 @@
 namespace morphmap {
 
 VertexTets build_vertex_tets(const TetIndices& T, Eigen::Index vertex_count) {
+  // A counting sort in chunks of tets, one a thread: each chunk counts its own uses of every vertex, so that chunk
+  // c's tets go to vertex v's list after those of chunks 0 .. c-1, in tet order within the chunk. Every list is in
+  // increasing tet order however many chunks there are, so the thread count changes nothing but the work split.
+  // (Serial, the build was the longest pass left on one core in a cow -> horse run, 14-16 ms.)
+  const Eigen::Index tets = T.rows();
+  const Eigen::Index chunks = std::max<Eigen::Index>(
+      1, std::min<Eigen::Index>(tbb::this_task_arena::max_concurrency(), tets / (Eigen::Index(1) << 16)));
+  const Eigen::Index chunk_tets = (tets + chunks - 1) / chunks;
+  const std::size_t n = static_cast<std::size_t>(vertex_count);
+  // cursor[c * n + v]: chunk c's count of vertex v, then where chunk c writes v's next tet. Zeroed by its chunk.
+  const std::unique_ptr<std::int64_t[]> cursor(new std::int64_t[std::size_t(chunks) * n]);
+  tbb::parallel_for(Eigen::Index(0), chunks, [&](Eigen::Index c) {
+    std::int64_t* count = cursor.get() + std::size_t(c) * n;
+    std::fill(count, count + n, std::int64_t(0));
+    const Eigen::Index end = std::min(tets, (c + 1) * chunk_tets);
+    for (Eigen::Index t = c * chunk_tets; t < end; ++t)
+      for (int k = 0; k < 4; ++k) ++count[static_cast<std::size_t>(T(t, k))];
+  });
   VertexTets adj;
-  adj.offset.assign(static_cast<std::size_t>(vertex_count) + 1, 0);
-  for (Eigen::Index t = 0; t < T.rows(); ++t)
-    for (int k = 0; k < 4; ++k) ++adj.offset[static_cast<std::size_t>(T(t, k)) + 1];
+  adj.offset.assign(n + 1, 0);
+  tbb::parallel_for(tbb::blocked_range<std::size_t>(0, n), [&](const tbb::blocked_range<std::size_t>& r) {
+    for (std::size_t v = r.begin(); v != r.end(); ++v) {
+      std::int64_t total = 0;
+      for (Eigen::Index c = 0; c < chunks; ++c) total += cursor[std::size_t(c) * n + v];
+      adj.offset[v + 1] = total;
+    }
+  });
   for (std::size_t i = 1; i < adj.offset.size(); ++i) adj.offset[i] += adj.offset[i - 1];
+  tbb::parallel_for(tbb::blocked_range<std::size_t>(0, n), [&](const tbb::blocked_range<std::size_t>& r) {
+    for (std::size_t v = r.begin(); v != r.end(); ++v) {
+      std::int64_t at = adj.offset[v];
+      for (Eigen::Index c = 0; c < chunks; ++c) {
+        std::int64_t& slot = cursor[std::size_t(c) * n + v];
+        const std::int64_t count = slot;
+        slot = at;
+        at += count;
+      }
+    }
+  });
   adj.tets.resize(static_cast<std::size_t>(adj.offset.back()));
-  std::vector<std::int64_t> fill(adj.offset.begin(), adj.offset.end() - 1);
-  for (Eigen::Index t = 0; t < T.rows(); ++t)
-    for (int k = 0; k < 4; ++k) adj.tets[static_cast<std::size_t>(fill[static_cast<std::size_t>(T(t, k))]++)] = int(t);
+  tbb::parallel_for(Eigen::Index(0), chunks, [&](Eigen::Index c) {
+    std::int64_t* fill = cursor.get() + std::size_t(c) * n;
+    const Eigen::Index end = std::min(tets, (c + 1) * chunk_tets);
+    for (Eigen::Index t = c * chunk_tets; t < end; ++t)
+      for (int k = 0; k < 4; ++k)
+        adj.tets[static_cast<std::size_t>(fill[static_cast<std::size_t>(T(t, k))]++)] = int(t);
+  });
   return adj;
 }
 

@@ -146,5 +146,31 @@ TEST(Adjacency, IndexRangeIsTheSmallestAndLargestIndex) {
   EXPECT_EQ(index_range(TetIndices(0, 4)), std::make_pair(0, -1));
 }
 
+// Enough tets for the parallel build to split them (a chunk a thread, each of at least 2^16 tets): every list in tet
+// order, as a serial counting sort gives it, on one thread and on all.
+TEST(Adjacency, StarsBuiltInChunksAreTheSerialBuild) {
+  const Eigen::Index vertices = 5000;
+  TetIndices T(700000, 4);
+  for (Eigen::Index t = 0; t < T.rows(); ++t)
+    for (int k = 0; k < 4; ++k) T(t, k) = int((t * 7919 + k * 104729 + (t / 1000) * 31) % vertices);
+  std::vector<std::vector<int>> expected(static_cast<std::size_t>(vertices));
+  for (Eigen::Index t = 0; t < T.rows(); ++t)
+    for (int k = 0; k < 4; ++k) expected[std::size_t(T(t, k))].push_back(int(t));
+  const VertexTets all = build_vertex_tets(T, vertices);
+  VertexTets one;
+  {
+    tbb::global_control single(tbb::global_control::max_allowed_parallelism, 1);
+    one = build_vertex_tets(T, vertices);
+  }
+  const VertexTets* const builds[] = {&all, &one};
+  for (const VertexTets* adj : builds) {
+    ASSERT_EQ(adj->offset.size(), std::size_t(vertices) + 1);
+    for (Eigen::Index v = 0; v < vertices; ++v) {
+      const std::vector<int> star(adj->tets.begin() + adj->first(int(v)), adj->tets.begin() + adj->last(int(v)));
+      ASSERT_EQ(star, expected[std::size_t(v)]) << "vertex " << v;
+    }
+  }
+}
+
 }  // namespace
 }  // namespace morphmap
