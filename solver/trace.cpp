@@ -158,42 +158,42 @@ double hermite_root(double a, double b, double da, double db) {
   return u;
 }
 
-// One pass of neighbour averaging of a #V by 4 field (see TraceOptions::field_smoothing): every vertex takes the
-// normalised mean of the unit vectors at itself and at the vertices of its star (each counted once per incident
-// tet, in star order, so the result does not depend on the thread count). Zero vectors stay zero.
-Points4 smooth_field(const TetMesh4& mesh, const VertexTets& adj, const Points4& field) {
-  Points4 out = Points4::Zero(field.rows(), 4);
+// Per vertex, in one walk of its star (every sum in star order, so the result does not depend on the thread count):
+// when `normals` is given, the unit vertex normal of the 3-manifold (the sum of the incident tets' normals, each
+// |cross4| = 6 x volume); when `smoothed` is given, one pass of neighbour averaging of `field` (#V by 4, see
+// TraceOptions::field_smoothing: the normalised mean of the unit vectors at the vertex and at the vertices of its star,
+// each counted once per incident tet; zero vectors stay zero). The two read the same rows of T, so the tracer's
+// set-up asks for both at once (two walks of the 6.6 M star entries of cow -> horse before).
+void star_sums(const TetMesh4& mesh, const VertexTets& adj, const Points4& field, Points4* normals, Points4* smoothed) {
+  if (normals != nullptr) *normals = Points4::Zero(mesh.vertex_count(), 4);
+  if (smoothed != nullptr) *smoothed = Points4::Zero(field.rows(), 4);
   tbb::parallel_for(tbb::blocked_range<Eigen::Index>(0, mesh.vertex_count()), [&](const auto& r) {
     for (Eigen::Index v = r.begin(); v != r.end(); ++v) {
-      if (!(field.row(v).squaredNorm() > 0.0)) continue;
-      Eigen::RowVector4d sum = field.row(v);
-      for (std::int64_t j = adj.first(int(v)); j < adj.last(int(v)); ++j)
-        for (int k = 0; k < 4; ++k) sum += field.row(mesh.T(adj.tet(j), k));
-      const double length = sum.norm();
-      if (length > 0.0) out.row(v) = sum / length;
-    }
-  });
-  return out;
-}
-
-// Unit vertex normals of the 3-manifold: the sum of the incident tets' normals (each |cross4| = 6 x volume),
-// summed in the star's tet order, so the result does not depend on the thread count.
-Points4 vertex_normals(const TetMesh4& mesh, const VertexTets& adj) {
-  Points4 normals = Points4::Zero(mesh.vertex_count(), 4);
-  tbb::parallel_for(tbb::blocked_range<Eigen::Index>(0, mesh.vertex_count()), [&](const auto& r) {
-    for (Eigen::Index v = r.begin(); v != r.end(); ++v) {
-      Eigen::Vector4d sum = Eigen::Vector4d::Zero();
+      const bool smooth = smoothed != nullptr && field.row(v).squaredNorm() > 0.0;
+      if (normals == nullptr && !smooth) continue;
+      Eigen::Vector4d normal = Eigen::Vector4d::Zero();
+      Eigen::RowVector4d sum = smooth ? Eigen::RowVector4d(field.row(v)) : Eigen::RowVector4d::Zero();
       for (std::int64_t j = adj.first(int(v)); j < adj.last(int(v)); ++j) {
         const int t = adj.tet(j);
-        const Eigen::Vector4d v0 = mesh.V.row(mesh.T(t, 0)).transpose();
-        sum += cross4(mesh.V.row(mesh.T(t, 1)).transpose() - v0, mesh.V.row(mesh.T(t, 2)).transpose() - v0,
-                      mesh.V.row(mesh.T(t, 3)).transpose() - v0);
+        const int row[4] = {mesh.T(t, 0), mesh.T(t, 1), mesh.T(t, 2), mesh.T(t, 3)};
+        if (normals != nullptr) {
+          const Eigen::Vector4d v0 = mesh.V.row(row[0]).transpose();
+          normal += cross4(mesh.V.row(row[1]).transpose() - v0, mesh.V.row(row[2]).transpose() - v0,
+                           mesh.V.row(row[3]).transpose() - v0);
+        }
+        if (smooth)
+          for (int k = 0; k < 4; ++k) sum += field.row(row[k]);
       }
-      const double length = sum.norm();
-      if (length > 0.0) normals.row(v) = (sum / length).transpose();
+      if (normals != nullptr) {
+        const double length = normal.norm();
+        if (length > 0.0) normals->row(v) = (normal / length).transpose();
+      }
+      if (smooth) {
+        const double length = sum.norm();
+        if (length > 0.0) smoothed->row(v) = sum / length;
+      }
     }
   });
-  return normals;
 }
 
 struct Stats {
@@ -212,10 +212,20 @@ class Tracer {
         options_(options),
         stars_(stars_or_build(stars, mesh.T, mesh.vertex_count())),
         adj_(*stars_),
-        normals_(vertex_normals(mesh, adj_)),
         across_(face_neighbours(mesh.T, adj_)) {
     field_ = field;
-    for (int pass = 0; pass < options.field_smoothing; ++pass) field_ = smooth_field(mesh, adj_, field_);
+    if (options.field_smoothing > 0) {
+      Points4 smoothed;
+      star_sums(mesh, adj_, field_, &normals_, &smoothed);
+      field_ = std::move(smoothed);
+    } else {
+      star_sums(mesh, adj_, field_, &normals_, nullptr);
+    }
+    for (int pass = 1; pass < options.field_smoothing; ++pass) {
+      Points4 smoothed;
+      star_sums(mesh, adj_, field_, nullptr, &smoothed);
+      field_ = std::move(smoothed);
+    }
   }
 
   TraceStatus trace(const MeshPoint& start, MeshPoint& end, Stats& stats) const {
