@@ -39,7 +39,7 @@ struct Simplex {
   Eigen::Matrix4d N = Eigen::Matrix4d::Zero();                          ///< columns: vertex normals (tets only)
   Eigen::Vector4d normal = Eigen::Vector4d::Zero();                     ///< the tet's own normal (tets only)
   double normal_norm2 = 0.0;                                            ///< |normal|^2, for every rate evaluation
-  double variation = 0.0;                                               ///< bound on how fast the rates change with w
+  double variation = 0.0;  ///< bound on how fast the rates change with w (set_variation)
 };
 
 // Weight rates at w (#size entries, zero beyond). In a tet the flow d is moved into the tet's span along the
@@ -86,25 +86,29 @@ __attribute__((always_inline)) inline bool simplex_system(const TetMesh4& mesh, 
   x.G.setZero();
   x.G.leftCols(K) = E * gram.inverse();
   if (!kFlow) return x.G.allFinite();
-  // Maxima of squared norms and one square root each: sqrt is monotone and correctly rounded, so this is bitwise
-  // the maximum of the norms, at 2 square roots a simplex instead of 11 (a tenth of cow -> horse's tracing time).
-  double largest_gradient2 = 0.0, spread2 = 0.0;
-  for (int j = 0; j < K; ++j) largest_gradient2 = std::max(largest_gradient2, x.G.col(j).squaredNorm());
-  for (int j = 0; j <= K; ++j) {
-    x.T.col(j) = field.row(x.ids[std::size_t(j)]).transpose();
-    spread2 = std::max(spread2, (x.T.col(j) - x.T.col(0)).squaredNorm());
-  }
+  for (int j = 0; j <= K; ++j) x.T.col(j) = field.row(x.ids[std::size_t(j)]).transpose();
   if (K == 3) {
     x.normal = cross4(E.col(0), E.col(1), E.col(2));
     x.normal_norm2 = x.normal.squaredNorm();
-    for (int j = 0; j <= K; ++j) {
-      x.N.col(j) = normals.row(x.ids[std::size_t(j)]).transpose();
-      spread2 = std::max(spread2, (x.N.col(j) - x.N.col(0)).squaredNorm());
-    }
+    for (int j = 0; j <= K; ++j) x.N.col(j) = normals.row(x.ids[std::size_t(j)]).transpose();
   }
-  x.variation = 2.0 * std::sqrt(largest_gradient2) * std::sqrt(spread2);
+  // x.variation is left to set_variation, for the one simplex a piece enters.
   // T needs no test: the vertex field is finite (checked on entry) and so is its smoothing (unit vectors averaged).
   return x.G.allFinite();
+}
+
+// The step bound's variation of x, whose flow system simplex_system has set: computed for the simplex a piece enters
+// only, not for every candidate choose() weighs (a trace's first piece weighs every tet of a vertex's star). Maxima
+// of squared norms and one square root each: sqrt is monotone and correctly rounded, so this is bitwise the maximum
+// of the norms, at 2 square roots a simplex instead of 11 (a tenth of cow -> horse's tracing time).
+void set_variation(Simplex& x) {
+  const int k = x.size - 1;
+  double largest_gradient2 = 0.0, spread2 = 0.0;
+  for (int j = 0; j < k; ++j) largest_gradient2 = std::max(largest_gradient2, x.G.col(j).squaredNorm());
+  for (int j = 0; j <= k; ++j) spread2 = std::max(spread2, (x.T.col(j) - x.T.col(0)).squaredNorm());
+  if (x.size == 4)
+    for (int j = 0; j <= k; ++j) spread2 = std::max(spread2, (x.N.col(j) - x.N.col(0)).squaredNorm());
+  x.variation = 2.0 * std::sqrt(largest_gradient2) * std::sqrt(spread2);
 }
 
 template <bool kFlow>
@@ -600,6 +604,14 @@ class Tracer {
   // the flow wins, ties to the larger simplex, then to the first found (lowest tet index).
   bool choose(const std::array<int, 4>& ids, const std::array<double, 4>& w, int n, int from_tet, Simplex& best,
               Weights& best_w, Weights& best_r, Stats& stats) const {
+    if (!choose_simplex(ids, w, n, from_tet, best, best_w, best_r, stats)) return false;
+    set_variation(best);
+    return true;
+  }
+
+  // choose() before the chosen simplex's step bound (set_variation).
+  bool choose_simplex(const std::array<int, 4>& ids, const std::array<double, 4>& w, int n, int from_tet, Simplex& best,
+                      Weights& best_w, Weights& best_r, Stats& stats) const {
     Eigen::Vector4d d = Eigen::Vector4d::Zero();
     for (int k = 0; k < n; ++k) d -= w[std::size_t(k)] * field_.row(ids[std::size_t(k)]).transpose();
     bool found = false;
