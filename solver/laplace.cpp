@@ -429,7 +429,10 @@ DeflationSpace space_time_cells(const TetMesh4& mesh, const std::vector<int>& un
 LaplaceResult solve_harmonic(const TetMesh4& mesh, const LaplaceOptions& options, const SharedStars& stars) {
   const auto start = Clock::now();
   // Before the expensive part, so a typo in the backend name fails fast.
-  std::unique_ptr<LinearSolver> solver = make_solver(options.solver, options.solve);
+  // The assembly makes A exactly symmetric (assemble_rows), so the solver's input check need not search for it.
+  SolveOptions solve = options.solve;
+  solve.symmetric_by_construction = true;
+  std::unique_ptr<LinearSolver> solver = make_solver(options.solver, solve);
   LaplaceResult result;
   DirichletSystem system = dirichlet_system(mesh, stars, options.measure_quality ? &result.quality : nullptr);
 

@@ -112,9 +112,16 @@ Eigen::Index first_bad_column(const SparseMatrixD& A, const F& bad_column) {
   return -1;
 }
 
-/// Rejects what a Cholesky or CG solve cannot handle, naming the backend in the message.
+SolverError non_positive_diagonal(const std::string& backend, Eigen::Index column) {
+  std::ostringstream msg;
+  msg << backend << ": matrix has a non-positive diagonal entry (column " << column << ")";
+  return SolverError(msg.str());
+}
+
+/// Rejects what a Cholesky or CG solve cannot handle, naming the backend in the message; without check_symmetry
+/// (SolveOptions::symmetric_by_construction) A's symmetry is taken on trust.
 /// Returns the diagonal (every entry positive).
-Eigen::VectorXd check_spd_input(const SparseMatrixD& A, const std::string& backend) {
+Eigen::VectorXd check_spd_input(const SparseMatrixD& A, const std::string& backend, bool check_symmetry = true) {
   if (A.rows() != A.cols()) {
     std::ostringstream msg;
     msg << backend << ": matrix is not square (" << A.rows() << " by " << A.cols() << ")";
@@ -139,6 +146,16 @@ Eigen::VectorXd check_spd_input(const SparseMatrixD& A, const std::string& backe
       msg << backend << ": matrix has a non-finite entry at (" << it.row() << ", " << non_finite << ")";
       throw SolverError(msg.str());
     }
+  }
+  if (!check_symmetry) {
+    Eigen::VectorXd diagonal = Eigen::VectorXd::Zero(n);
+    for_blocks(n, [&](Eigen::Index j) {
+      for (int k = outer[j]; k < column_end(j); ++k)
+        if (inner[k] == j) diagonal(j) += values[k];
+    });
+    const Eigen::Index non_positive = first_bad_column(A, [&](Eigen::Index j) { return !(diagonal(j) > 0.0); });
+    if (non_positive >= 0) throw non_positive_diagonal(backend, non_positive);
+    return diagonal;
   }
   double max_abs = 0.0;
   {
@@ -209,11 +226,7 @@ Eigen::VectorXd check_spd_input(const SparseMatrixD& A, const std::string& backe
     msg << backend << ": matrix is not symmetric (column " << asymmetric << ", tolerance " << tolerance << ")";
     throw SolverError(msg.str());
   }
-  if (non_positive >= 0) {
-    std::ostringstream msg;
-    msg << backend << ": matrix has a non-positive diagonal entry (column " << non_positive << ")";
-    throw SolverError(msg.str());
-  }
+  if (non_positive >= 0) throw non_positive_diagonal(backend, non_positive);
   return diagonal;
 }
 
@@ -248,9 +261,10 @@ void take_storage(SparseMatrixD& A, SparseMatrixD& own) {
 }
 
 /// Takes A's storage (A is left empty), compressed, and checks it; the one entry point of every backend's compute.
-Eigen::VectorXd take_matrix(SparseMatrixD& A, SparseMatrixD& own, const std::string& backend) {
+Eigen::VectorXd take_matrix(SparseMatrixD& A, SparseMatrixD& own, const std::string& backend,
+                            bool check_symmetry = true) {
   take_storage(A, own);
-  return check_spd_input(own, backend);
+  return check_spd_input(own, backend, check_symmetry);
 }
 
 std::string format_number(double value, int digits = 3) {
@@ -1119,7 +1133,7 @@ class PcgSolver final : public LinearSolver {
   void compute_taking(SparseMatrixD& A) override {
     const auto start = Clock::now();
     ready_ = false;
-    const Eigen::VectorXd diagonal = take_matrix(A, A_, name());
+    const Eigen::VectorXd diagonal = take_matrix(A, A_, name(), !options_.symmetric_by_construction);
     setup(diagonal);
     setup_seconds_ = seconds_since(start);
   }

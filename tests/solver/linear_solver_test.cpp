@@ -194,6 +194,44 @@ TEST_P(LinearSolverBackend, RejectsBadInput) {
   EXPECT_THROW(solver->solve(Eigen::VectorXd::Ones(3), x), SolverError);  // wrong size
 }
 
+// SolveOptions::symmetric_by_construction takes the symmetry on trust (cg, cg-ic, cg-amg) and keeps the other checks.
+TEST(LinearSolverTrust, SymmetricByConstructionSkipsTheSymmetryTestOnly) {
+  SolveOptions trusted;
+  trusted.symmetric_by_construction = true;
+  for (const std::string backend : {"cg", "cg-ic", "cg-amg"}) {
+    auto error = [&](const SparseMatrixD& A) {
+      auto solver = make_solver(backend, trusted);
+      try {
+        solver->compute(A);
+      } catch (const SolverError& e) {
+        return std::string(e.what());
+      }
+      return std::string();
+    };
+    SparseMatrixD asymmetric = path_laplacian(5, 0.0);
+    asymmetric.coeffRef(1, 2) = -0.5;
+    EXPECT_EQ(error(asymmetric), "") << backend;
+    EXPECT_NE(error_of(backend, asymmetric), "") << backend;
+    SparseMatrixD infinite = path_laplacian(5, 0.0);
+    infinite.coeffRef(3, 3) = std::numeric_limits<double>::infinity();
+    EXPECT_EQ(error(infinite), backend + ": matrix has a non-finite entry at (3, 3)");
+    SparseMatrixD negative_diagonal = path_laplacian(5, 0.0);
+    negative_diagonal.coeffRef(4, 4) = -1.0;
+    EXPECT_EQ(error(negative_diagonal), backend + ": matrix has a non-positive diagonal entry (column 4)");
+    // The same solution as with the check.
+    const SparseMatrixD A = path_laplacian(30, 0.1);
+    const Eigen::VectorXd b = Eigen::VectorXd::LinSpaced(30, -1.0, 2.0);
+    auto checked = make_solver(backend);
+    auto taken = make_solver(backend, trusted);
+    checked->compute(A);
+    taken->compute(A);
+    Eigen::VectorXd x_checked, x_taken;
+    checked->solve(b, x_checked);
+    taken->solve(b, x_taken);
+    EXPECT_EQ(x_checked, x_taken) << backend;
+  }
+}
+
 TEST_P(LinearSolverBackend, EmptySystem) {
   auto solver = make_solver(GetParam());
   solver->compute(SparseMatrixD(0, 0));
