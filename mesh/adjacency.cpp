@@ -189,11 +189,13 @@ FaceNeighbours face_neighbours(const TetIndices& T, const VertexTets& stars) {
       for (std::size_t a = 0; a < uses.size();) {
         std::size_t e = a + 1;
         while (e < uses.size() && uses[e].face == uses[a].face) ++e;
-        for (std::size_t i = a; i < e; ++i)
-          result.across[std::size_t(uses[i].tet) * 4 + std::size_t(uses[i].slot)] = e - a == 1 ? FaceNeighbours::kNoTet
-                                                                                    : e - a == 2
-                                                                                        ? uses[i == a ? a + 1 : a].tet
-                                                                                        : FaceNeighbours::kManyTets;
+        const std::size_t holders = e - a;
+        for (std::size_t i = a; i < e; ++i) {
+          int other = FaceNeighbours::kManyTets;
+          if (holders == 1) other = FaceNeighbours::kNoTet;
+          if (holders == 2) other = uses[i == a ? a + 1 : a].tet;
+          result.across[std::size_t(uses[i].tet) * 4 + std::size_t(uses[i].slot)] = other;
+        }
         a = e;
       }
     }

@@ -114,7 +114,7 @@ double measurable_volume(const Eigen::Matrix3d& R) {
 /// guess (the steps end where the edges cross c); NaN and cosines outside [-1, 1] take the halving search.
 class BinTable {
  public:
-  BinTable(const std::vector<double>& edge_cos) : edge_(edge_cos), guess_(kCells) {
+  explicit BinTable(const std::vector<double>& edge_cos) : edge_(edge_cos), guess_(kCells) {
     for (int j = 0; j < kCells; ++j) guess_[std::size_t(j)] = halving(-1.0 + 2.0 * (j + 0.5) / kCells);
   }
   int operator()(double c) const {

@@ -112,12 +112,6 @@ Eigen::Index first_bad_column(const SparseMatrixD& A, const F& bad_column) {
   return -1;
 }
 
-SolverError non_positive_diagonal(const std::string& backend, Eigen::Index column) {
-  std::ostringstream msg;
-  msg << backend << ": matrix has a non-positive diagonal entry (column " << column << ")";
-  return SolverError(msg.str());
-}
-
 /// Rejects what a Cholesky or CG solve cannot handle, naming the backend in the message; without check_symmetry
 /// (SolveOptions::symmetric_by_construction) A's symmetry is taken on trust.
 /// Returns the diagonal (every entry positive).
@@ -147,78 +141,77 @@ Eigen::VectorXd check_spd_input(const SparseMatrixD& A, const std::string& backe
       throw SolverError(msg.str());
     }
   }
+  Eigen::VectorXd diagonal = Eigen::VectorXd::Zero(n);
+  Eigen::Index asymmetric = n;
+  double tolerance = 0.0;
   if (!check_symmetry) {
-    Eigen::VectorXd diagonal = Eigen::VectorXd::Zero(n);
     for_blocks(n, [&](Eigen::Index j) {
       for (int k = outer[j]; k < column_end(j); ++k)
         if (inner[k] == j) diagonal(j) += values[k];
     });
-    const Eigen::Index non_positive = first_bad_column(A, [&](Eigen::Index j) { return !(diagonal(j) > 0.0); });
-    if (non_positive >= 0) throw non_positive_diagonal(backend, non_positive);
-    return diagonal;
-  }
-  double max_abs = 0.0;
-  {
-    std::vector<double> block_max(static_cast<std::size_t>(block_count(n)), 0.0);
-    tbb::parallel_for(Eigen::Index(0), block_count(n), [&](Eigen::Index block) {
-      const Eigen::Index end = std::min(n, (block + 1) * kBlockRows);
-      double m = 0.0;
-      for (Eigen::Index j = block * kBlockRows; j < end; ++j)
-        for (int k = outer[j]; k < column_end(j); ++k) m = std::max(m, std::abs(values[k]));
-      block_max[static_cast<std::size_t>(block)] = m;
-    });
-    for (double m : block_max) max_abs = std::max(max_abs, m);
-  }
-  const double tolerance = kSymmetryTolerance * max_abs;
+  } else {
+    double max_abs = 0.0;
+    {
+      std::vector<double> block_max(static_cast<std::size_t>(block_count(n)), 0.0);
+      tbb::parallel_for(Eigen::Index(0), block_count(n), [&](Eigen::Index block) {
+        const Eigen::Index end = std::min(n, (block + 1) * kBlockRows);
+        double m = 0.0;
+        for (Eigen::Index j = block * kBlockRows; j < end; ++j)
+          for (int k = outer[j]; k < column_end(j); ++k) m = std::max(m, std::abs(values[k]));
+        block_max[static_cast<std::size_t>(block)] = m;
+      });
+      for (double m : block_max) max_abs = std::max(max_abs, m);
+    }
+    tolerance = kSymmetryTolerance * max_abs;
 
-  // Symmetry: each strictly upper entry (i, j), i < j, is compared with its mirror (j, i), found by binary search in
-  // column i; a mismatch flags column i, the smaller of the two (what a scan of both triangles would report first).
-  // Mirrors found are counted: if fewer than the strictly lower entries, some lower entry has no upper partner,
-  // and a scan of both triangles (each entry against coeff()) finds the first offending column. Checking one
-  // triangle with a counted match takes half the searches: the check was most of cg's set-up.
-  const Eigen::Index blocks = block_count(n);
-  Eigen::VectorXd diagonal = Eigen::VectorXd::Zero(n);
-  std::vector<Eigen::Index> block_first_asymmetric(static_cast<std::size_t>(blocks), n);
-  std::vector<std::int64_t> block_matched(static_cast<std::size_t>(blocks), 0);
-  std::vector<std::int64_t> block_lower(static_cast<std::size_t>(blocks), 0);
-  tbb::parallel_for(Eigen::Index(0), blocks, [&](Eigen::Index block) {
-    const Eigen::Index end = std::min(n, (block + 1) * kBlockRows);
-    std::int64_t matched = 0, lower = 0;
-    Eigen::Index first_asymmetric = n;
-    for (Eigen::Index j = block * kBlockRows; j < end; ++j) {
-      for (int k = outer[j]; k < column_end(j); ++k) {
-        const int i = inner[k];
-        if (i == j) {
-          diagonal(j) += values[k];
-        } else if (i > j) {
-          ++lower;
-        } else {
-          const int* first = inner + outer[i];
-          const int* last = inner + column_end(i);
-          const int* at = std::lower_bound(first, last, int(j));
-          double mirror = 0.0;
-          if (at != last && *at == j) {
-            mirror = values[at - inner];
-            ++matched;
+    // Symmetry: each strictly upper entry (i, j), i < j, is compared with its mirror (j, i), found by binary search in
+    // column i; a mismatch flags column i, the smaller of the two (what a scan of both triangles would report first).
+    // Mirrors found are counted: if fewer than the strictly lower entries, some lower entry has no upper partner,
+    // and a scan of both triangles (each entry against coeff()) finds the first offending column. Checking one
+    // triangle with a counted match takes half the searches: the check was most of cg's set-up.
+    const Eigen::Index blocks = block_count(n);
+    std::vector<Eigen::Index> block_first_asymmetric(static_cast<std::size_t>(blocks), n);
+    std::vector<std::int64_t> block_matched(static_cast<std::size_t>(blocks), 0);
+    std::vector<std::int64_t> block_lower(static_cast<std::size_t>(blocks), 0);
+    tbb::parallel_for(Eigen::Index(0), blocks, [&](Eigen::Index block) {
+      const Eigen::Index end = std::min(n, (block + 1) * kBlockRows);
+      std::int64_t matched = 0, lower = 0;
+      Eigen::Index first_asymmetric = n;
+      for (Eigen::Index j = block * kBlockRows; j < end; ++j) {
+        for (int k = outer[j]; k < column_end(j); ++k) {
+          const int i = inner[k];
+          if (i == j) {
+            diagonal(j) += values[k];
+          } else if (i > j) {
+            ++lower;
+          } else {
+            const int* first = inner + outer[i];
+            const int* last = inner + column_end(i);
+            const int* at = std::lower_bound(first, last, int(j));
+            double mirror = 0.0;
+            if (at != last && *at == j) {
+              mirror = values[at - inner];
+              ++matched;
+            }
+            if (std::abs(values[k] - mirror) > tolerance)
+              first_asymmetric = std::min<Eigen::Index>(first_asymmetric, i);
           }
-          if (std::abs(values[k] - mirror) > tolerance) first_asymmetric = std::min<Eigen::Index>(first_asymmetric, i);
         }
       }
-    }
-    block_first_asymmetric[static_cast<std::size_t>(block)] = first_asymmetric;
-    block_matched[static_cast<std::size_t>(block)] = matched;
-    block_lower[static_cast<std::size_t>(block)] = lower;
-  });
-  Eigen::Index asymmetric = n;
-  for (Eigen::Index first : block_first_asymmetric) asymmetric = std::min(asymmetric, first);
-  if (std::accumulate(block_matched.begin(), block_matched.end(), std::int64_t(0)) !=
-      std::accumulate(block_lower.begin(), block_lower.end(), std::int64_t(0))) {
-    const Eigen::Index full = first_bad_column(A, [&](Eigen::Index j) {
-      for (SparseMatrixD::InnerIterator it(A, j); it; ++it)
-        if (it.row() != j && std::abs(it.value() - A.coeff(j, it.row())) > tolerance) return true;
-      return false;
+      block_first_asymmetric[static_cast<std::size_t>(block)] = first_asymmetric;
+      block_matched[static_cast<std::size_t>(block)] = matched;
+      block_lower[static_cast<std::size_t>(block)] = lower;
     });
-    if (full >= 0) asymmetric = std::min(asymmetric, full);
+    for (Eigen::Index first : block_first_asymmetric) asymmetric = std::min(asymmetric, first);
+    if (std::accumulate(block_matched.begin(), block_matched.end(), std::int64_t(0)) !=
+        std::accumulate(block_lower.begin(), block_lower.end(), std::int64_t(0))) {
+      const Eigen::Index full = first_bad_column(A, [&](Eigen::Index j) {
+        for (SparseMatrixD::InnerIterator it(A, j); it; ++it)
+          if (it.row() != j && std::abs(it.value() - A.coeff(j, it.row())) > tolerance) return true;
+        return false;
+      });
+      if (full >= 0) asymmetric = std::min(asymmetric, full);
+    }
   }
   const Eigen::Index non_positive = first_bad_column(A, [&](Eigen::Index j) { return !(diagonal(j) > 0.0); });
   if (asymmetric < n && (non_positive < 0 || asymmetric <= non_positive)) {
@@ -226,7 +219,11 @@ Eigen::VectorXd check_spd_input(const SparseMatrixD& A, const std::string& backe
     msg << backend << ": matrix is not symmetric (column " << asymmetric << ", tolerance " << tolerance << ")";
     throw SolverError(msg.str());
   }
-  if (non_positive >= 0) throw non_positive_diagonal(backend, non_positive);
+  if (non_positive >= 0) {
+    std::ostringstream msg;
+    msg << backend << ": matrix has a non-positive diagonal entry (column " << non_positive << ")";
+    throw SolverError(msg.str());
+  }
   return diagonal;
 }
 

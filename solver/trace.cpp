@@ -217,18 +217,13 @@ class Tracer {
         stars_(stars_or_build(stars, mesh.T, mesh.vertex_count())),
         adj_(*stars_),
         across_(face_neighbours(mesh.T, adj_)) {
+    // The normals ride along with the first smoothing pass (or walk the stars alone without one).
     field_ = field;
-    if (options.field_smoothing > 0) {
+    for (int pass = 0; pass < std::max(1, options.field_smoothing); ++pass) {
       Points4 smoothed;
-      star_sums(mesh, adj_, field_, &normals_, &smoothed);
-      field_ = std::move(smoothed);
-    } else {
-      star_sums(mesh, adj_, field_, &normals_, nullptr);
-    }
-    for (int pass = 1; pass < options.field_smoothing; ++pass) {
-      Points4 smoothed;
-      star_sums(mesh, adj_, field_, nullptr, &smoothed);
-      field_ = std::move(smoothed);
+      star_sums(mesh, adj_, field_, pass == 0 ? &normals_ : nullptr,
+                pass < options.field_smoothing ? &smoothed : nullptr);
+      if (pass < options.field_smoothing) field_ = std::move(smoothed);
     }
   }
 
