@@ -52,6 +52,7 @@ VertexTets build_vertex_tets(const TetIndices& T, Eigen::Index vertex_count) {
       }
     }
   });
+  // Not zeroed (UninitialisedVector): the fill below writes every entry, in parallel, so it is also the first touch.
   adj.tets.resize(static_cast<std::size_t>(adj.offset.back()));
   tbb::parallel_for(Eigen::Index(0), chunks, [&](Eigen::Index c) {
     std::int64_t* fill = cursor.get() + std::size_t(c) * n;

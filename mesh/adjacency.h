@@ -10,6 +10,7 @@
 #include <utility>
 #include <vector>
 
+#include "mesh/default_init.h"
 #include "mesh/tet_mesh4.h"
 
 namespace morphmap {
@@ -18,7 +19,7 @@ namespace morphmap {
 /// choice among equally good tets is deterministic.
 struct VertexTets {
   std::vector<std::int64_t> offset;  ///< #V + 1: tets of vertex v are tets[offset[v] .. offset[v + 1])
-  std::vector<int> tets;             ///< 4 * #T tet indices
+  UninitialisedVector<int> tets;     ///< 4 * #T tet indices (resized unzeroed: the build writes every one)
 
   std::int64_t first(int v) const { return offset[std::size_t(v)]; }
   std::int64_t last(int v) const { return offset[std::size_t(v) + 1]; }
