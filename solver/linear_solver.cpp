@@ -87,6 +87,23 @@ inline double row_times(const SparseMatrixD& A, Eigen::Index i, const Eigen::Vec
   return even + odd;
 }
 
+/// row_times with row i's columns read as 16-bit offsets from i (`offset`, in A's storage order, as cg-amg's finest
+/// level keeps them): the same products summed in the same order, 10 bytes an entry read instead of 12.
+inline double row_times(const SparseMatrixD& A, const std::int16_t* offset, Eigen::Index i, const Eigen::VectorXd& v) {
+  if (offset == nullptr) return row_times(A, i, v);
+  const double* values = A.valuePtr();
+  const double* x = v.data() + i;
+  const int end = A.outerIndexPtr()[i + 1];
+  int k = A.outerIndexPtr()[i];
+  double even = 0.0, odd = 0.0;
+  for (; k + 1 < end; k += 2) {
+    even += values[k] * x[offset[k]];
+    odd += values[k + 1] * x[offset[k + 1]];
+  }
+  if (k < end) even += values[k] * x[offset[k]];
+  return even + odd;
+}
+
 /// Storage of a compressed sparse matrix: values, inner indices and outer starts.
 std::int64_t sparse_bytes(std::int64_t nnz, std::int64_t cols) {
   return nnz * (kDoubleBytes + kIndexBytes) + (cols + 1) * kIndexBytes;
@@ -766,6 +783,12 @@ class AggregationMultigrid {
     return std::accumulate(partial_.begin(), partial_.end(), 0.0);
   }
 
+  /// The finest level's columns as 16-bit offsets from their row, in the storage order of the matrix given to
+  /// compute() (whose arrays that level shares), or null when some column is too far from its row.
+  const std::int16_t* fine_offsets() const {
+    return levels_.empty() || levels_[0].offset.empty() ? nullptr : levels_[0].offset.data();
+  }
+
   /// Unknowns and stored entries of every level, finest first: "249554 (3592586), 48303 (742099), ...".
   std::string describe() const {
     std::ostringstream s;
@@ -1295,6 +1318,7 @@ class PcgSolver final : public LinearSolver {
       inverse_diagonal_ = diagonal.cwiseInverse();
     } else if (preconditioner_ == Preconditioner::Multigrid) {
       amg_.compute(A_, options_);
+      offsets_ = amg_.fine_offsets();
     } else if (A_.rows() > 0) {
       // Lin-More incomplete Cholesky: the pattern of A's lower triangle, with a diagonal shift retried until the
       // factorisation exists. Natural ordering: our unknowns come in the extraction's spatially coherent order,
@@ -1315,7 +1339,7 @@ class PcgSolver final : public LinearSolver {
   /// r = b - A x; returns |r|^2.
   double residual(const Eigen::VectorXd& b, const Eigen::VectorXd& x, Eigen::VectorXd& r) {
     return block_sum(b.size(), partial_a_, [&](Eigen::Index i) {
-      r(i) = b(i) - row_times(A_, i, x);
+      r(i) = b(i) - row_times(A_, offsets_, i, x);
       return r(i) * r(i);
     });
   }
@@ -1352,7 +1376,7 @@ class PcgSolver final : public LinearSolver {
   /// q = A p; returns p.q.
   double multiply_dot(const Eigen::VectorXd& p, Eigen::VectorXd& q) {
     return block_sum(p.size(), partial_a_, [&](Eigen::Index i) {
-      q(i) = row_times(A_, i, p);
+      q(i) = row_times(A_, offsets_, i, p);
       return p(i) * q(i);
     });
   }
@@ -1405,6 +1429,7 @@ class PcgSolver final : public LinearSolver {
   Eigen::VectorXd inverse_diagonal_;
   Eigen::IncompleteCholesky<double, Eigen::Lower, Eigen::NaturalOrdering<int>> ic_;
   AggregationMultigrid amg_;
+  const std::int16_t* offsets_ = nullptr;  // A_'s columns as offsets (the multigrid's, for cg-amg), or null
   Deflation deflation_;
   bool deflation_failed_ = false;  // a space was given but Z^T A Z could not be factorised
   bool complete_ = false;          // x is the deflated iterate until advance() completes it at convergence
