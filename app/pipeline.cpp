@@ -1176,7 +1176,9 @@ PipelineResult run_pipeline(const PipelineOptions& options) {
     seconds["topology"] = seconds_since(topology_start) + extracted_check_b_seconds;
   }
   {
-    const ComponentCensus census = component_census(mesh);
+    // The Laplace stage's components are the census's when it left no tet out (a degenerate one carries no stiffness).
+    const bool same_components = laplace.degenerate_tets == 0 && !laplace.component_root.empty();
+    const ComponentCensus census = component_census(mesh, same_components ? &laplace.component_root : nullptr);
     report["components"] = {
         {"through", census.through},
         {"born", census.born},

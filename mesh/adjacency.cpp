@@ -9,6 +9,9 @@
 #include <algorithm>
 #include <atomic>
 #include <memory>
+#include <string>
+
+#include "mesh/errors.h"
 
 namespace morphmap {
 
@@ -204,9 +207,14 @@ FaceNeighbours face_neighbours(const TetIndices& T, const VertexTets& stars) {
   return result;
 }
 
-ComponentCensus component_census(const TetMesh4& mesh) {
+ComponentCensus component_census(const TetMesh4& mesh, const std::vector<int>* labels) {
   const Eigen::Index n = mesh.vertex_count();
-  const std::vector<int> root = component_labels(mesh.T, n);
+  if (labels != nullptr && Eigen::Index(labels->size()) != n)
+    throw InvalidInput("component_census: " + std::to_string(labels->size()) + " component labels for " +
+                       std::to_string(n) + " vertices");
+  std::vector<int> computed;
+  if (labels == nullptr) computed = component_labels(mesh.T, n);
+  const std::vector<int>& root = labels != nullptr ? *labels : computed;
   std::vector<std::uint8_t> touches(static_cast<std::size_t>(n), 0);  // per root: bit 1 A, bit 2 B
   std::vector<Eigen::Index> size(static_cast<std::size_t>(n), 0);
   for (Eigen::Index v = 0; v < n; ++v) {

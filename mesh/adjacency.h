@@ -97,6 +97,8 @@ struct ComponentCensus {
   std::int64_t born_vertices = 0, vanishing_vertices = 0, floating_vertices = 0;
 };
 
-ComponentCensus component_census(const TetMesh4& mesh);
+/// `labels`, when given, are component_labels(mesh.T, #V) already computed (the Laplace stage's, when it kept every
+/// tet), so the union-find is not run twice; they must be the labels of every tet.
+ComponentCensus component_census(const TetMesh4& mesh, const std::vector<int>* labels = nullptr);
 
 }  // namespace morphmap

@@ -277,7 +277,8 @@ DirichletSystem dirichlet_system(const TetMesh4& mesh, const SharedStars& stars,
   {
     // Components through tets that carry stiffness only: a vertex held by degenerate tets alone would have
     // an empty row in K, so it must count as its own (floating) component.
-    const std::vector<int> root = component_labels(T, n, &has_stiffness);
+    system.component_root = component_labels(T, n, &has_stiffness);
+    const std::vector<int>& root = system.component_root;
     std::vector<char> anchored(static_cast<std::size_t>(n), 0);  // per root: touches A or B
     std::vector<double> time_sum(static_cast<std::size_t>(n), 0.0);
     std::vector<Eigen::Index> size(static_cast<std::size_t>(n), 0);
@@ -438,6 +439,7 @@ LaplaceResult solve_harmonic(const TetMesh4& mesh, const LaplaceOptions& options
 
   result.assemble_seconds = system.assemble_seconds;
   result.degenerate_tets = system.degenerate_tets;
+  result.component_root = std::move(system.component_root);
   result.floating_components = system.floating_components;
   result.floating_vertices = system.floating_vertices;
   result.unknowns = system.A.rows();

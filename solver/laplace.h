@@ -65,6 +65,9 @@ struct DirichletSystem {
   std::int64_t floating_vertices = 0;
   std::int64_t degenerate_tets = 0;
   double assemble_seconds = 0.0;  ///< local stiffness, components, A and b
+  /// #V: component_labels of the tets with stiffness, which are every tet when degenerate_tets is 0 (and then these
+  /// are the census's labels, component_census)
+  std::vector<int> component_root;
 };
 
 /// Assembles the system solve_harmonic solves (it calls this), for benchmarks and external solvers. `stars`: the
@@ -96,6 +99,7 @@ struct LaplaceResult {
   std::int64_t floating_components = 0;  ///< components touching neither A nor B: s set to their mean t
   std::int64_t floating_vertices = 0;
   std::int64_t degenerate_tets = 0;  ///< zero-volume tets left out of the operator (see tet_frame)
+  std::vector<int> component_root;   ///< DirichletSystem::component_root
   double assemble_seconds = 0.0;
   QualityResult quality;  ///< with LaplaceOptions::measure_quality (its seconds are part of `seconds`)
   double seconds = 0.0;   ///< whole stage

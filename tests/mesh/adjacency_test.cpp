@@ -5,7 +5,10 @@
 #include <tbb/global_control.h>
 
 #include <algorithm>
+#include <numeric>
+#include <vector>
 
+#include "mesh/errors.h"
 #include "tests/mesh/product_mesh.h"
 
 namespace morphmap {
@@ -52,6 +55,21 @@ TEST(Adjacency, CensusTellsBornAndVanishingComponentsApart) {
   EXPECT_EQ(c.vanishing, 1);
   EXPECT_EQ(c.vanishing_vertices, 18);
   EXPECT_EQ(c.floating, 0);
+
+  // From labels computed before (the Laplace stage's): the same census, and labels of another size are refused.
+  const std::vector<int> labels = component_labels(both.T, both.vertex_count());
+  const ComponentCensus given = component_census(both, &labels);
+  EXPECT_EQ(given.born, c.born);
+  EXPECT_EQ(given.vanishing, c.vanishing);
+  EXPECT_EQ(given.through, c.through);
+  EXPECT_EQ(given.vanishing_vertices, c.vanishing_vertices);
+  EXPECT_EQ(given.born_vertices, c.born_vertices);
+  // Every vertex its own component: as many "floating" components as interior vertices.
+  std::vector<int> apart(labels.size());
+  std::iota(apart.begin(), apart.end(), 0);
+  EXPECT_GT(component_census(both, &apart).floating, 0);
+  const std::vector<int> short_labels(labels.begin(), labels.end() - 1);
+  EXPECT_THROW(component_census(both, &short_labels), InvalidInput);
 }
 
 // The concurrent labels against a serial union-find, with some tets left out (so that components split), on one

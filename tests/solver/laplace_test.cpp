@@ -12,6 +12,7 @@
 #include <string>
 #include <vector>
 
+#include "mesh/adjacency.h"
 #include "mesh/errors.h"
 #include "tests/solver/test_meshes.h"
 
@@ -222,16 +223,20 @@ TEST_P(LaplaceHarmonic, SlabIsLinearInTau) {
   }
 }
 
-TEST_P(LaplaceHarmonic, FloatingComponentIsDetected) {
-  // The slab [0,1]^2 x [0,1] and, far from it, a box spanning t in [0.3, 0.6] with no A or B vertex.
-  const TetMesh4 slab = test::make_slab_mesh(3, 4);
+// The slab [0,1]^2 x [0,1] and, far from it, a box spanning t in [0.3, 0.6] with no A or B vertex.
+TetMesh4 floating_box() {
   test::BoxSpec spec;
   spec.nx = spec.ny = 2;
   spec.nz = 3;
   spec.height = 0.3;
   spec.origin = Eigen::Vector4d(5.0, 0.0, 0.0, 0.3);
   spec.flag_ends = false;
-  const TetMesh4 box = test::make_box_mesh(spec);
+  return test::make_box_mesh(spec);
+}
+
+TEST_P(LaplaceHarmonic, FloatingComponentIsDetected) {
+  const TetMesh4 slab = test::make_slab_mesh(3, 4);
+  const TetMesh4 box = floating_box();
   const TetMesh4 mesh = test::merge_meshes(slab, box);
   const LaplaceResult result = solve_harmonic(mesh, options());
   EXPECT_EQ(result.floating_components, 1);
@@ -271,6 +276,32 @@ TEST_P(LaplaceHarmonic, DegenerateTetIsSkipped) {
   const LaplaceResult result = solve_harmonic(mesh, options());
   EXPECT_EQ(result.degenerate_tets, 1);
   EXPECT_LT((result.s - expected).cwiseAbs().maxCoeff(), 1e-9);
+}
+
+// The components the stage found are the census's when no tet was left out: with a floating box, its labels are
+// component_labels' over every tet; with a degenerate tet (whose vertices then may split off) they are those of the
+// tets with stiffness.
+TEST(LaplaceComponents, RootsAreTheComponentLabelsOfTheTetsWithStiffness) {
+  const TetMesh4 slab = test::make_slab_mesh(3, 4);
+  const TetMesh4 mesh = test::merge_meshes(slab, floating_box());
+  const LaplaceResult result = solve_harmonic(mesh, LaplaceOptions{});
+  ASSERT_EQ(result.degenerate_tets, 0);
+  EXPECT_EQ(result.component_root, component_labels(mesh.T, mesh.vertex_count()));
+  EXPECT_EQ(result.component_root[std::size_t(slab.V.rows())], slab.V.rows());  // the box's smallest vertex
+
+  TetMesh4 flat = test::make_slab_mesh(3, 3);
+  flat.V.conservativeResize(flat.V.rows() + 1, 4);
+  flat.V.bottomRows(1) = flat.V.row(16);  // a vertex on a flat tet only
+  flat.side.push_back(VertexSide::Interior);
+  flat.T.conservativeResize(flat.T.rows() + 1, 4);
+  flat.T.bottomRows(1) << 16, 17, 20, int(flat.V.rows() - 1);
+  flat.source_cell.push_back(0);
+  const LaplaceResult degenerate = solve_harmonic(flat, LaplaceOptions{});
+  ASSERT_EQ(degenerate.degenerate_tets, 1);
+  std::vector<std::uint8_t> keep(std::size_t(flat.T.rows()), 1);
+  keep.back() = 0;
+  EXPECT_EQ(degenerate.component_root, component_labels(flat.T, flat.vertex_count(), &keep));
+  EXPECT_NE(degenerate.component_root, component_labels(flat.T, flat.vertex_count()));
 }
 
 INSTANTIATE_TEST_SUITE_P(LaplaceBackends, LaplaceHarmonic, ::testing::ValuesIn(solver_names()),
