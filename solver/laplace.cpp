@@ -445,7 +445,7 @@ LaplaceResult solve_harmonic(const TetMesh4& mesh, const LaplaceOptions& options
   result.unknowns = system.A.rows();
   result.s = std::move(system.s);
   // Direct backends ignore x; the iterative ones (gauss-seidel included) start from it.
-  Eigen::VectorXd x = options.warm_start ? system.x0 : Eigen::VectorXd::Zero(system.A.rows());
+  Eigen::VectorXd x = options.warm_start ? std::move(system.x0) : Eigen::VectorXd::Zero(system.A.rows());
   if (result.unknowns > 0) {
     solver->set_deflation(space_time_cells(mesh, system.unknown, int(result.unknowns), options.deflation_cell_voxels));
     solver->compute(std::move(system.A));  // handed over, not copied: A is not needed after this

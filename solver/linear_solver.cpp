@@ -634,7 +634,7 @@ struct AmgLevel {
   std::vector<int> agg;                      // row -> row of the next coarser level
   std::vector<int> member_start, members;    // row of the next coarser level -> its rows here, in order (set-up)
   std::vector<int> block_offset;             // row block k's aggregates are block_offset[k] .. block_offset[k + 1] - 1
-  Eigen::VectorXd b, x, u;                   // right-hand side, solution, D (x + P e)
+  Eigen::VectorXd b, x, u;                   // right-hand side and solution (below the finest level), D (x + P e)
 };
 
 /// Sum of val[k] * x[index[k]] over k in [begin, last), with two interleaved partial sums (a row has ~15 entries).
@@ -726,8 +726,11 @@ class AggregationMultigrid {
       const CsrView Av = depth == 0 ? view(A) : view(L.op);
       L.n = Av.rows;
       const std::vector<double> diagonal = prepare_smoother(L, Av);
-      L.b.resize(L.n);
-      L.x.resize(L.n);
+      // The finest level's right-hand side is CG's residual and its solution z: it needs only u.
+      if (depth > 0) {
+        L.b.resize(L.n);
+        L.x.resize(L.n);
+      }
       L.u.resize(L.n);
       if (L.n <= options.amg_coarsest || depth + 1 == int(kMaxLevels)) break;
       int count = 0;
