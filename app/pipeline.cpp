@@ -860,7 +860,10 @@ PipelineResult run_pipeline(const PipelineOptions& options) {
     const Eigen::MatrixXd& labels_4d = target_seam_labels.size() > 0 ? target_seam_labels
                                        : target_labels_4d.size() > 0 ? target_labels_4d
                                                                      : seam_labels;
-    result.target_seams = split_seams(result.target, mesh, labels_4d, A, locator, target_seam_options, relabelled);
+    // B's labels have their closest points already (hits, updated where the repair moved a label).
+    const Eigen::MatrixXd closest_labels = points_of(hits);
+    result.target_seams =
+        split_seams(result.target, mesh, labels_4d, A, locator, target_seam_options, relabelled, &closest_labels);
   }
   for (SliceOut& s : slices) s.seams = split_seams(s.mesh, mesh, seam_labels, A, locator, seam_options);
   const Eigen::MatrixXd seam_hits = points_of(locator.closest_all(result.target_seams.labels));

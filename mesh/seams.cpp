@@ -539,7 +539,8 @@ struct EdgeKeyHash {
 }  // namespace
 
 SeamResult split_seams(const SliceMesh& slice, const TetMesh4& mesh, const Eigen::MatrixXd& labels, const Surface& A,
-                       const SurfaceLocator& locator, const SeamOptions& options, const std::vector<char>& relabelled) {
+                       const SurfaceLocator& locator, const SeamOptions& options, const std::vector<char>& relabelled,
+                       const Eigen::MatrixXd* closest_labels) {
   const auto start = Clock::now();
   if (slice.labels.rows() != slice.V.rows() || slice.labels.cols() != 3)
     throw InvalidInput("split_seams: the slice has no labels");
@@ -549,13 +550,16 @@ SeamResult split_seams(const SliceMesh& slice, const TetMesh4& mesh, const Eigen
     throw InvalidInput("split_seams: the slice lacks provenance (source_tet, source_edge)");
   if (!relabelled.empty() && relabelled.size() != std::size_t(slice.V.rows()))
     throw InvalidInput("split_seams: relabelled must have one flag per slice vertex");
+  if (closest_labels != nullptr && (closest_labels->rows() != slice.V.rows() || closest_labels->cols() != 3))
+    throw InvalidInput("split_seams: closest_labels must be #slice.V by 3");
 
   SeamResult result;
   const double diagonal = bounding_box(A.V).diagonal().norm();
   // Labels are compared and interpolated as their closest points on A: transport leaves a band of labels
   // inside A where trajectories from both sides of a seam met (interpolated between the poles, §8.1's
   // "erroneous" labels); on A they fall to one side or the other, which makes the two populations separate.
-  const Eigen::MatrixXd slice_labels = points_of(locator.closest_all(slice.labels));
+  const Eigen::MatrixXd slice_labels =
+      closest_labels != nullptr ? *closest_labels : points_of(locator.closest_all(slice.labels));
   std::unordered_map<int, Eigen::Vector3d> projected;
   const std::function<Eigen::Vector3d(int)> label_of = [&](int v) {
     const auto [it, inserted] = projected.emplace(v, Eigen::Vector3d::Zero());

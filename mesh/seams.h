@@ -95,10 +95,12 @@ struct SeamResult {
 /// topological seams and, when A has UVs, along A's texture seams. `locator` must be built on A. `relabelled`
 /// (empty, or #slice.V flags) marks the slice's vertices whose labels were replaced after the transport (the fold
 /// repair): a triangle whose corners are all relabelled and whose own labels span no seam is not cut, since the
-/// labels of its source tet's other vertices are the ones the repair replaced.
+/// labels of its source tet's other vertices are the ones the repair replaced. `closest_labels`, when given, are the
+/// closest points on A of slice.labels (#slice.V by 3) that the caller has already (the map's own hits of B's labels),
+/// so they are not searched for twice.
 SeamResult split_seams(const SliceMesh& slice, const TetMesh4& mesh, const Eigen::MatrixXd& labels, const Surface& A,
                        const SurfaceLocator& locator, const SeamOptions& options = {},
-                       const std::vector<char>& relabelled = {});
+                       const std::vector<char>& relabelled = {}, const Eigen::MatrixXd* closest_labels = nullptr);
 
 /// Number of connected curves formed by edges (#E by 2 vertex ids).
 std::int64_t count_curves(const std::vector<std::array<int, 2>>& edges);

@@ -81,6 +81,36 @@ TEST(Seams, TriangleAcrossALabelSeamIsCutAndNoPieceSpansIt) {
   EXPECT_EQ(off.spans_over_threshold, 1);
 }
 
+// The closest points of B's labels, when the caller has them, are taken instead of searched for: the hits the
+// search would find give the same split, and other points (all at the north pole) give other labels.
+TEST(Seams, GivenClosestPointsOfTheLabelsAreUsed) {
+  Eigen::MatrixXd labels(4, 3);
+  labels << 0, 0, 1,  //
+      0.05, 0, -1,    //
+      0, 0.05, -1,    //
+      0, 0, -1;
+  const TetMesh4 mesh = one_tet();
+  const Surface A = unit_sphere();
+  const SurfaceLocator locator(A);
+  const SliceMesh B = target_boundary(mesh, labels);
+  SeamOptions options;
+  options.texture = false;
+  const SeamResult searched = split_seams(B, mesh, labels, A, locator, options);
+  const Eigen::MatrixXd hits = points_of(locator.closest_all(B.labels));
+  const SeamResult given = split_seams(B, mesh, labels, A, locator, options, {}, &hits);
+  EXPECT_EQ(given.V, searched.V);
+  EXPECT_EQ(given.F, searched.F);
+  EXPECT_EQ(given.labels, searched.labels);
+  EXPECT_EQ(given.topological_split, 1);
+  const Eigen::MatrixXd north = Eigen::RowVector3d(0, 0, 1).replicate(B.V.rows(), 1);
+  const SeamResult moved = split_seams(B, mesh, labels, A, locator, options, {}, &north);
+  ASSERT_EQ(moved.labels.rows(), searched.labels.rows());
+  EXPECT_NE(moved.labels, searched.labels);  // vertex 1's label, for one, is the north pole's now
+  EXPECT_EQ(moved.labels.row(1), Eigen::RowVector3d(0, 0, 1));
+  const Eigen::MatrixXd short_hits = hits.topRows(hits.rows() - 1);
+  EXPECT_THROW(split_seams(B, mesh, labels, A, locator, options, {}, &short_hits), InvalidInput);
+}
+
 // B's triangle has labels within the seam threshold of each other, but the tet's fourth vertex, near two of them
 // and far from the third, makes the linkage put the third alone: the triangle is cut between corners whose labels
 // agree. Where the fold repair relabelled all three corners (the fourth vertex's label is one it replaced), the
