@@ -53,14 +53,19 @@ SeamResult split_one_tet(const Eigen::MatrixXd& labels, bool topological = true,
   return split_seams(B, mesh, labels, A, locator, options, relabelled);
 }
 
-// One tet: three vertices on B (t = 1), one inside. Vertex 0 carries the north pole's label, the others
-// the south pole's, so B's only triangle straddles a topological seam.
-TEST(Seams, TriangleAcrossALabelSeamIsCutAndNoPieceSpansIt) {
+// Labels of one_tet() across a seam: vertex 0 carries the north pole's label, the others the south pole's, so B's
+// only triangle straddles a topological seam.
+Eigen::MatrixXd pole_labels() {
   Eigen::MatrixXd labels(4, 3);
   labels << 0, 0, 1,  //
       0.05, 0, -1,    //
       0, 0.05, -1,    //
       0, 0, -1;
+  return labels;
+}
+
+TEST(Seams, TriangleAcrossALabelSeamIsCutAndNoPieceSpansIt) {
+  const Eigen::MatrixXd labels = pole_labels();
   const SeamResult r = split_one_tet(labels);
   EXPECT_EQ(r.seam_tets, 1);
   EXPECT_EQ(r.topological_split, 1);
@@ -84,11 +89,7 @@ TEST(Seams, TriangleAcrossALabelSeamIsCutAndNoPieceSpansIt) {
 // The closest points of B's labels, when the caller has them, are taken instead of searched for: the hits the
 // search would find give the same split, and other points (all at the north pole) give other labels.
 TEST(Seams, GivenClosestPointsOfTheLabelsAreUsed) {
-  Eigen::MatrixXd labels(4, 3);
-  labels << 0, 0, 1,  //
-      0.05, 0, -1,    //
-      0, 0.05, -1,    //
-      0, 0, -1;
+  const Eigen::MatrixXd labels = pole_labels();
   const TetMesh4 mesh = one_tet();
   const Surface A = unit_sphere();
   const SurfaceLocator locator(A);
