@@ -2,11 +2,13 @@
 #include "mesh/adjacency.h"
 
 #include <tbb/blocked_range.h>
+#include <tbb/enumerable_thread_specific.h>
 #include <tbb/parallel_for.h>
 #include <tbb/parallel_reduce.h>
 #include <tbb/task_arena.h>
 
 #include <algorithm>
+#include <array>
 #include <atomic>
 #include <memory>
 #include <string>
@@ -165,9 +167,36 @@ FaceNeighbours face_neighbours(const TetIndices& T, const VertexTets& stars) {
     int tet;
     int slot;  // the position in the tet's row of its vertex opposite the face
   };
-  const Eigen::Index vertices = Eigen::Index(stars.offset.size()) - 1;
-  tbb::parallel_for(tbb::blocked_range<Eigen::Index>(0, vertices, 512), [&](const tbb::blocked_range<Eigen::Index>& r) {
+  // Equal faces are found by a table over pairs of v's link vertices (each numbered in order of first appearance),
+  // which costs a lookup a use where sorting the uses (22 a vertex on cow -> horse) was a fifth of the pass; a vertex
+  // with more than kLink link vertices above it takes the sort. Within a face the order of its holders does not
+  // matter (two tets see each other, more all see kManyTets), so both give the same entries.
+  constexpr int kLink = 64;
+  struct Scratch {
+    std::vector<int> local;                  // #V: a link vertex's number, -1 when it has none
+    std::vector<int> numbered;               // the link vertices numbered, to reset `local`
+    std::vector<int> cell;                   // kLink x kLink: the group of a pair of link numbers, -1 when none
+    std::vector<int> touched;                // cells set, to reset them
+    std::vector<std::array<int, 3>> groups;  // per face: its first use, its second (or -1) and its use count
+    std::vector<int> group_of;               // per use
     std::vector<FaceUse> uses;
+  };
+  const Eigen::Index vertices = Eigen::Index(stars.offset.size()) - 1;
+  tbb::enumerable_thread_specific<Scratch> scratch([&] {
+    Scratch w;
+    w.local.assign(std::size_t(vertices), -1);
+    w.cell.assign(std::size_t(kLink) * kLink, -1);
+    return w;
+  });
+  auto write = [&](const FaceUse& use, int holders, const FaceUse* other) {
+    int value = FaceNeighbours::kManyTets;
+    if (holders == 1) value = FaceNeighbours::kNoTet;
+    if (holders == 2) value = other->tet;
+    result.across[std::size_t(use.tet) * 4 + std::size_t(use.slot)] = value;
+  };
+  tbb::parallel_for(tbb::blocked_range<Eigen::Index>(0, vertices, 512), [&](const tbb::blocked_range<Eigen::Index>& r) {
+    Scratch& w = scratch.local();
+    std::vector<FaceUse>& uses = w.uses;
     for (Eigen::Index v = r.begin(); v != r.end(); ++v) {
       uses.clear();
       for (std::int64_t j = stars.first(int(v)); j < stars.last(int(v)); ++j) {
@@ -188,20 +217,50 @@ FaceNeighbours face_neighbours(const TetIndices& T, const VertexTets& stars) {
           uses.push_back({(b << 32) | c, t, k});
         }
       }
-      // Within a face the order does not matter: two tets see each other, more all see kManyTets.
-      std::sort(uses.begin(), uses.end(), [](const FaceUse& x, const FaceUse& y) { return x.face < y.face; });
-      for (std::size_t a = 0; a < uses.size();) {
-        std::size_t e = a + 1;
-        while (e < uses.size() && uses[e].face == uses[a].face) ++e;
-        const std::size_t holders = e - a;
-        for (std::size_t i = a; i < e; ++i) {
-          int other = FaceNeighbours::kManyTets;
-          if (holders == 1) other = FaceNeighbours::kNoTet;
-          if (holders == 2) other = uses[i == a ? a + 1 : a].tet;
-          result.across[std::size_t(uses[i].tet) * 4 + std::size_t(uses[i].slot)] = other;
+      auto number = [&](int u) {
+        int& n = w.local[std::size_t(u)];
+        if (n < 0) {
+          n = int(w.numbered.size());
+          w.numbered.push_back(u);
         }
-        a = e;
+        return n;
+      };
+      bool fits = true;
+      w.group_of.resize(uses.size());
+      for (std::size_t u = 0; u < uses.size() && fits; ++u) {
+        const int lb = number(int(uses[u].face >> 32)), lc = number(int(uses[u].face & 0xffffffffu));
+        fits = lb < kLink && lc < kLink;
+        if (!fits) break;
+        int& g = w.cell[std::size_t(lb * kLink + lc)];
+        if (g < 0) {
+          g = int(w.groups.size());
+          w.groups.push_back({int(u), -1, 0});
+          w.touched.push_back(lb * kLink + lc);
+        } else if (w.groups[std::size_t(g)][1] < 0) {
+          w.groups[std::size_t(g)][1] = int(u);
+        }
+        ++w.groups[std::size_t(g)][2];
+        w.group_of[u] = g;
       }
+      if (fits) {
+        for (std::size_t u = 0; u < uses.size(); ++u) {
+          const std::array<int, 3>& g = w.groups[std::size_t(w.group_of[u])];
+          write(uses[u], g[2], &uses[std::size_t(g[0]) == u ? std::size_t(g[1]) : std::size_t(g[0])]);
+        }
+      } else {
+        std::sort(uses.begin(), uses.end(), [](const FaceUse& x, const FaceUse& y) { return x.face < y.face; });
+        for (std::size_t a = 0; a < uses.size();) {
+          std::size_t e = a + 1;
+          while (e < uses.size() && uses[e].face == uses[a].face) ++e;
+          for (std::size_t i = a; i < e; ++i) write(uses[i], int(e - a), &uses[i == a ? a + 1 : a]);
+          a = e;
+        }
+      }
+      for (const int c : w.touched) w.cell[std::size_t(c)] = -1;
+      for (const int u : w.numbered) w.local[std::size_t(u)] = -1;
+      w.touched.clear();
+      w.numbered.clear();
+      w.groups.clear();
     }
   });
   return result;
