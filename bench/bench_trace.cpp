@@ -15,6 +15,7 @@
 #include <string>
 
 #include "bench/bench_cases.h"
+#include "mesh/adjacency.h"
 #include "mesh/extract.h"
 #include "mesh/morph.h"
 #include "mesh/slice.h"
@@ -76,6 +77,27 @@ void BM_Trace(benchmark::State& state, const std::string& morph, int voxels) {
       benchmark::Counter(traces, benchmark::Counter::kIsIterationInvariantRate | benchmark::Counter::kInvert);
   state.SetLabel(std::to_string(c.mesh.tet_count()) + " tets");
 }
+
+// The tracer's set-up alone, with the stars given as the pipeline gives them: face neighbours, vertex normals and the
+// smoothed field (BM_AdjacencyFaceNeighbours times the first).
+void BM_TracerSetup(benchmark::State& state, const std::string& morph, int voxels) {
+  const TraceCase& c = trace_case(morph, voxels);
+  if (!c.error.empty()) {
+    state.SkipWithError(c.error.c_str());
+    return;
+  }
+  const morphmap::SharedStars stars =
+      std::make_shared<const morphmap::VertexTets>(morphmap::build_vertex_tets(c.mesh.T, c.mesh.vertex_count()));
+  for (auto _ : state) {
+    const morphmap::CharacteristicTracer tracer(c.mesh, c.s, c.field, morphmap::TraceOptions{}, stars);
+    benchmark::DoNotOptimize(&tracer);
+  }
+  state.SetLabel(std::to_string(c.mesh.tet_count()) + " tets");
+}
+
+BENCHMARK_CAPTURE(BM_TracerSetup, cow_horse, std::string("cow-horse"), 63)
+    ->Unit(benchmark::kMillisecond)
+    ->UseRealTime();
 
 BENCHMARK_CAPTURE(BM_Trace, sphere_torus, std::string("sphere-torus"), 13)
     ->Unit(benchmark::kMillisecond)
