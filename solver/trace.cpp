@@ -870,18 +870,23 @@ TraceResult CharacteristicTracer::trace(const std::vector<MeshPoint>& starts) co
   result.status.resize(count);
   std::vector<Stats> stats(count);
   const std::vector<std::size_t> order = spatial_order(mesh, starts);
-  tbb::parallel_for(tbb::blocked_range<std::size_t>(0, count, 16), [&](const auto& r) {
-    for (std::size_t o = r.begin(); o != r.end(); ++o) {
-      const std::size_t i = order[o];
-      MeshPoint& end = result.end_point[i];
-      result.status[i] = tracer.trace(starts[i], end, stats[i]);
-      Eigen::Vector3d x = Eigen::Vector3d::Zero();
-      for (int k = 0; k < 4; ++k)
-        if (end.ids[std::size_t(k)] >= 0 && end.ids[std::size_t(k)] < nv)
-          x += end.weights[std::size_t(k)] * mesh.V.row(end.ids[std::size_t(k)]).head<3>().transpose();
-      result.end.row(Eigen::Index(i)) = x.transpose();
-    }
-  });
+  // Chunks of at most 8 traces (simple_partitioner): a trace takes from a few to 645 pieces, and the auto
+  // partitioner's larger chunks left one core idle for the last one on cow -> horse.
+  tbb::parallel_for(
+      tbb::blocked_range<std::size_t>(0, count, 8),
+      [&](const auto& r) {
+        for (std::size_t o = r.begin(); o != r.end(); ++o) {
+          const std::size_t i = order[o];
+          MeshPoint& end = result.end_point[i];
+          result.status[i] = tracer.trace(starts[i], end, stats[i]);
+          Eigen::Vector3d x = Eigen::Vector3d::Zero();
+          for (int k = 0; k < 4; ++k)
+            if (end.ids[std::size_t(k)] >= 0 && end.ids[std::size_t(k)] < nv)
+              x += end.weights[std::size_t(k)] * mesh.V.row(end.ids[std::size_t(k)]).head<3>().transpose();
+          result.end.row(Eigen::Index(i)) = x.transpose();
+        }
+      },
+      tbb::simple_partitioner());
   // Serial sums in start order: the same figures for any thread count.
   for (std::size_t i = 0; i < count; ++i) {
     switch (result.status[i]) {
