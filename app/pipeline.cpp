@@ -873,8 +873,10 @@ PipelineResult run_pipeline(const PipelineOptions& options) {
 
   // Stretch of what target.obj and labels.txt hold (the seam-split B, as `morphmap stretch` measures them), and of
   // B before the seam split, where triangles across a seam interpolate between its sides.
-  const StretchResult stretch = measure_stretch(A, result.target_seams.V, result.target_seams.F, seam_hits);
-  const StretchResult stretch_unsplit = measure_stretch(A, result.target.V, result.target.F, points_of(hits));
+  const StretchResult stretch =
+      measure_stretch(A, result.target_seams.V, result.target_seams.F, seam_hits, {}, &locator);
+  const StretchResult stretch_unsplit =
+      measure_stretch(A, result.target.V, result.target.F, points_of(hits), {}, &locator);
   seconds["metrics"] = stretch.seconds + stretch_unsplit.seconds;
 
   // Contact sheet (paper Figures 1 and 9) in the morph frame, where A, the slices and B share one camera.

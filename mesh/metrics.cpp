@@ -10,6 +10,7 @@
 #include <chrono>
 #include <cmath>
 #include <limits>
+#include <optional>
 #include <vector>
 
 #include "mesh/errors.h"
@@ -89,7 +90,8 @@ Eigen::Vector2d triangle_singular_values(const Eigen::Matrix<double, 3, 2>& Ep, 
 }
 
 StretchResult measure_stretch(const Surface& A, const Eigen::MatrixXd& V, const TriIndices& F,
-                              const Eigen::MatrixXd& preimages, const StretchOptions& options) {
+                              const Eigen::MatrixXd& preimages, const StretchOptions& options,
+                              const SurfaceLocator* given_locator) {
   const auto start = std::chrono::steady_clock::now();
   check_stretch_inputs(V, F, preimages);
   StretchResult r;
@@ -107,7 +109,8 @@ StretchResult measure_stretch(const Surface& A, const Eigen::MatrixXd& V, const 
   const std::vector<Eigen::Vector3d>& normal_p = maps.normal_p;
 
   // Folds: the preimage triangle's normal against A's outward normal at its centroid.
-  const SurfaceLocator locator(A);
+  std::optional<SurfaceLocator> own_locator;
+  const SurfaceLocator& locator = given_locator != nullptr ? *given_locator : own_locator.emplace(A);
   const std::vector<SurfaceHit> hits = locator.closest_all(centroid);
   const double mean_preimage_area = area_p.sum() / std::max<Eigen::Index>(1, n);
   const double mean_area_b = area_b.sum() / std::max<Eigen::Index>(1, n);

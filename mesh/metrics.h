@@ -11,6 +11,8 @@
 
 namespace morphmap {
 
+class SurfaceLocator;
+
 struct StretchOptions {
   double collapse_ratio =
       1e-12;  ///< a preimage triangle with area below this times the mean preimage area is collapsed
@@ -51,9 +53,11 @@ Eigen::Vector2d triangle_singular_values(const Eigen::Matrix<double, 3, 2>& Ep, 
 
 /// Stretch of the map that sends each vertex of B (V #V by 3, F #F by 3) to its preimage on A
 /// (preimages #V by 3, points of A's surface, in A's coordinates). A's outward face normals at the
-/// preimage centroids decide folds.
+/// preimage centroids decide folds. `locator`: a SurfaceLocator of A the caller has already (the map's), or null to
+/// build one (an Embree scene of A's triangles for every call).
 StretchResult measure_stretch(const Surface& A, const Eigen::MatrixXd& V, const TriIndices& F,
-                              const Eigen::MatrixXd& preimages, const StretchOptions& options = {});
+                              const Eigen::MatrixXd& preimages, const StretchOptions& options = {},
+                              const SurfaceLocator* locator = nullptr);
 
 /// Per-triangle singular values (sigma1 >= sigma2, columns 0 and 1; #F by 2) of the same map, normalised like
 /// measure_stretch; NaN rows for the triangles measure_stretch counts as collapsed or degenerate.
