@@ -562,20 +562,38 @@ SeamResult split_seams(const SliceMesh& slice, const TetMesh4& mesh, const Eigen
       closest_labels != nullptr ? *closest_labels : points_of(locator.closest_all(slice.labels));
   // The closest points on A of the labels at the vertices of the faces' source tets, which the topological pass
   // reads: queried up front, in parallel and in vertex order, instead of one by one as that serial pass met them
-  // (half of the seam stage's time on cow -> horse, with the other core idle). The same hits (closest_all).
+  // (half of the seam stage's time on cow -> horse, with the other core idle). The same hits (closest_all). A slice
+  // vertex that is a mesh vertex carrying that vertex's label (B's vertices on the target) has its closest point in
+  // closest_labels already: 18.5 k of cow -> horse's 28 k queries.
   std::vector<int> projected_row;
   Eigen::MatrixXd projected;
   if (options.topological) {
-    projected_row.assign(std::size_t(mesh.vertex_count()), -1);
+    const std::size_t nv = std::size_t(mesh.vertex_count());
+    projected_row.assign(nv, -1);
     for (const int t : slice.source_tet)
       for (int k = 0; k < 4; ++k) projected_row[std::size_t(mesh.T(t, k))] = 0;
+    std::vector<int> known(nv, -1);  // the slice vertex whose closest label is this mesh vertex's
+    if (closest_labels != nullptr)
+      for (Eigen::Index i = 0; i < slice.V.rows(); ++i) {
+        const int v = slice.source_edge(i, 0);
+        if (v == slice.source_edge(i, 1) && projected_row[std::size_t(v)] == 0 && labels.row(v) == slice.labels.row(i))
+          known[std::size_t(v)] = int(i);
+      }
     Eigen::Index rows = 0;
-    for (int& row : projected_row)
-      if (row == 0) row = int(rows++);
-    Eigen::MatrixXd queries(rows, 3);
-    for (std::size_t v = 0; v < projected_row.size(); ++v)
-      if (projected_row[v] >= 0) queries.row(projected_row[v]) = labels.row(Eigen::Index(v));
-    projected = points_of(locator.closest_all(queries));
+    std::vector<int> query_vertex;
+    for (std::size_t v = 0; v < nv; ++v) {
+      if (projected_row[v] < 0) continue;
+      projected_row[v] = int(rows++);
+      if (known[v] < 0) query_vertex.push_back(int(v));
+    }
+    Eigen::MatrixXd queries(Eigen::Index(query_vertex.size()), 3);
+    for (std::size_t q = 0; q < query_vertex.size(); ++q) queries.row(Eigen::Index(q)) = labels.row(query_vertex[q]);
+    const Eigen::MatrixXd found = points_of(locator.closest_all(queries));
+    projected.resize(rows, 3);
+    for (std::size_t q = 0; q < query_vertex.size(); ++q)
+      projected.row(projected_row[std::size_t(query_vertex[q])]) = found.row(Eigen::Index(q));
+    for (std::size_t v = 0; v < nv; ++v)
+      if (known[v] >= 0) projected.row(projected_row[v]) = closest_labels->row(known[v]);
   }
   const std::function<Eigen::Vector3d(int)> label_of = [&](int v) {
     return Eigen::Vector3d(projected.row(projected_row[std::size_t(v)]).transpose());
