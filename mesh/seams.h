@@ -97,7 +97,8 @@ struct SeamResult {
 /// repair): a triangle whose corners are all relabelled and whose own labels span no seam is not cut, since the
 /// labels of its source tet's other vertices are the ones the repair replaced. `closest_labels`, when given, are the
 /// closest points on A of slice.labels (#slice.V by 3) that the caller has already (the map's own hits of B's labels),
-/// so they are not searched for twice.
+/// so they are not searched for twice; a slice vertex at a mesh vertex whose label in `labels` is its own lends its
+/// closest point to that vertex too.
 SeamResult split_seams(const SliceMesh& slice, const TetMesh4& mesh, const Eigen::MatrixXd& labels, const Surface& A,
                        const SurfaceLocator& locator, const SeamOptions& options = {},
                        const std::vector<char>& relabelled = {}, const Eigen::MatrixXd* closest_labels = nullptr);
