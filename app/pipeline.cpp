@@ -4,6 +4,7 @@
 
 #include <sys/resource.h>
 #include <tbb/global_control.h>
+#include <tbb/parallel_invoke.h>
 #include <unistd.h>
 
 #include <algorithm>
@@ -1232,18 +1233,26 @@ PipelineResult run_pipeline(const PipelineOptions& options) {
     // corners take different UVs (PLY has per-vertex UVs only; before 2026-12-06 it held the unsplit B, whose
     // triangles across a texture seam interpolated across the texture atlas).
     const Eigen::MatrixXd target_world = frame_b.to_world(result.target_seams.V);
-    write_obj(out->staged("target.obj"), target_world, result.target_seams.F, result.target_seams.UV,
-              result.target_seams.FUV, mtl_name);
-    if (options.write_ply) {
-      const SeamResult& t = result.target_seams;
-      if (t.FUV.rows() > 0) {
-        const PerVertexUvMesh ply = per_vertex_uv(target_world, t.F, t.UV, t.FUV);
-        write_ply(out->staged("target.ply"), ply.V, ply.F, ply.UV);
-      } else {
-        write_ply(out->staged("target.ply"), target_world, t.F, Eigen::MatrixXd());
-      }
-    }
-    write_labels(out->staged("labels.txt"), seam_preimages);
+    // Independent files, each formatted on one thread: side by side (staged() is not thread-safe: named first).
+    const std::string obj_path = out->staged("target.obj");
+    const std::string ply_path = options.write_ply ? out->staged("target.ply") : std::string();
+    const std::string labels_path = out->staged("labels.txt");
+    tbb::parallel_invoke(
+        [&] {
+          write_obj(obj_path, target_world, result.target_seams.F, result.target_seams.UV, result.target_seams.FUV,
+                    mtl_name);
+        },
+        [&] {
+          if (!options.write_ply) return;
+          const SeamResult& t = result.target_seams;
+          if (t.FUV.rows() > 0) {
+            const PerVertexUvMesh ply = per_vertex_uv(target_world, t.F, t.UV, t.FUV);
+            write_ply(ply_path, ply.V, ply.F, ply.UV);
+          } else {
+            write_ply(ply_path, target_world, t.F, Eigen::MatrixXd());
+          }
+        },
+        [&] { write_labels(labels_path, seam_preimages); });
     nlohmann::json slice_report = nlohmann::json::array();
     for (const SliceOut& s : slices) {
       // Intermediate shapes live between A's and B's frames; interpolate the similarity.
