@@ -282,6 +282,45 @@ TEST_F(MeshIoTest, IndicesOutOfRangeAreInvalidInput) {
   EXPECT_EQ(error_of<InvalidInput>(ply), ply + ": face 0 has vertex index 3 out of range [0, 3)");
 }
 
+// A long file (40 k lines, faces with positive and negative indices in turn) reads exactly, and of two errors the
+// first in the file is reported, with its line.
+TEST_F(MeshIoTest, LongObjReadsAsOnePass) {
+  const int n = 20000;
+  std::vector<std::string> lines;
+  for (int i = 0; i < n; ++i) {
+    lines.push_back("v " + std::to_string(i) + " " + std::to_string(i % 7) + " 0.5");
+    if (i < 2) continue;
+    if (i % 2 == 0)
+      lines.push_back("f -1 -2 -3");  // vertices i, i - 1, i - 2
+    else
+      lines.push_back("f " + std::to_string(i - 1) + " " + std::to_string(i) + " " + std::to_string(i + 1));
+  }
+  auto join = [](const std::vector<std::string>& all) {
+    std::string text;
+    for (const std::string& line : all) text += line + "\n";
+    return text;
+  };
+  ASSERT_GT(lines.size(), 2u * 16384u);
+  const Surface s = read_surface(write("long.obj", join(lines)));
+  ASSERT_EQ(s.V.rows(), n);
+  ASSERT_EQ(s.F.rows(), n - 2);
+  for (int i = 0; i < n; ++i) ASSERT_EQ(s.V.row(i), Eigen::RowVector3d(i, i % 7, 0.5)) << i;
+  for (int i = 2; i < n; ++i) {
+    const Eigen::RowVector3i face =
+        i % 2 == 0 ? Eigen::RowVector3i(i, i - 1, i - 2) : Eigen::RowVector3i(i - 2, i - 1, i);
+    ASSERT_EQ(s.F.row(i - 2), face) << i;
+  }
+  // Two errors: the earlier one is reported.
+  std::vector<std::string> bad = lines;
+  bad[35000] = "f 1 2";
+  bad[20000] = "v 0 0 zero";
+  EXPECT_EQ(error_of<InvalidInput>(write("bad.obj", join(bad))),
+            (dir_ / "bad.obj").string() + ": line 20001: bad number 'zero'");
+  bad[20000] = lines[20000];
+  EXPECT_NE(error_of<InvalidInput>(write("bad.obj", join(bad))).find("line 35001: face has 2 corners"),
+            std::string::npos);
+}
+
 TEST_F(MeshIoTest, MalformedTextIsInvalidInput) {
   EXPECT_NE(error_of<InvalidInput>(write("m.obj", "v 0 0\nf 1 1 1\n")).find("line 1: vertex needs 3 coordinates"),
             std::string::npos);
