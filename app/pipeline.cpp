@@ -800,7 +800,10 @@ PipelineResult run_pipeline(const PipelineOptions& options) {
     trace_target_labels(result.target);
   }
   std::vector<SurfaceHit> hits = locator.closest_all(result.target.labels);
-  seconds["map"] = seconds_since(start) + locator_seconds - extracted_check_b_seconds;  // that check is topology's
+  // The tracer's set-up (its face neighbours and vertex normals) ran before `start` and is the map's too; B's
+  // topology check ran inside it and is the topology stage's.
+  const double tracer_setup_seconds = tracer ? tracer->setup_seconds() : 0.0;
+  seconds["map"] = seconds_since(start) + locator_seconds + tracer_setup_seconds - extracted_check_b_seconds;
   progress.stage("map", seconds["map"]);
 
   // Fold repair of B's map (mesh/untangle.h). The repaired labels are points of A; the topological seam split reads
@@ -1150,6 +1153,7 @@ PipelineResult run_pipeline(const PipelineOptions& options) {
                      {"rate_evaluations", traced_total.rate_evaluations},
                      {"descent_pieces", traced_total.descent_pieces},
                      {"seconds", traced_total.seconds},
+                     {"setup_seconds", tracer ? tracer->setup_seconds() : 0.0},
                      {"fallback",
                       "a trace whose flow stalls continues down the steepest descent of s (descended); one that "
                       "still cannot reach A (s flat) takes the point of A where it stopped (stalled)"}};
