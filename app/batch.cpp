@@ -449,9 +449,16 @@ std::vector<BatchJob> parse_manifest(const std::string& text, const std::string&
       const std::string& key = item.key();
       if (key == "name" || key == "source" || key == "target") continue;
       const CLI::Option* option = parser.get_option_no_throw("--" + key);
-      if (option == nullptr)
-        throw InvalidInput(where + ": unknown key '" + key + "'" +
-                           (key == "output" || key == "o" ? " (the batch names each job's folder)" : ""));
+      if (option == nullptr) {
+        // Keys are map's option names without the dashes; JSON habits write them with underscores.
+        std::string dashed = key;
+        std::replace(dashed.begin(), dashed.end(), '_', '-');
+        std::string hint;
+        if (key == "output" || key == "o") hint = " (the batch names each job's folder)";
+        if (dashed != key && parser.get_option_no_throw("--" + dashed) != nullptr)
+          hint = " (did you mean '" + dashed + "'?)";
+        throw InvalidInput(where + ": unknown key '" + key + "'" + hint);
+      }
       const std::string flag = "--" + key, what = where + ": '" + key + "'";
       if (option->get_expected_max() == 0) {  // a flag
         if (!item.value().is_boolean()) throw InvalidInput(what + " is a flag: true or false");

@@ -138,6 +138,8 @@ TEST_F(Batch, ManifestErrorsNameManifestAndJob) {
   expect_manifest_error(std::string("{\"jobs\": [{") + kTiny + "}, {\"target\": \"torus\"}]}", {"job 2", "source"});
   expect_manifest_error(std::string("{\"jobs\": [{") + kTiny + ", \"name\": \"a\", \"voxel\": 9}]}",
                         {"job 1 (a)", "unknown key 'voxel'"});
+  expect_manifest_error(std::string("{\"jobs\": [{") + kTiny + ", \"time_steps\": 4}]}",
+                        {"unknown key 'time_steps'", "did you mean 'time-steps'?"});
   expect_manifest_error(std::string("{\"jobs\": [{") + kTiny + ", \"output\": \"x\"}]}", {"output"});
   expect_manifest_error(std::string("{\"jobs\": [{") + kTiny + ", \"solver\": \"magic\"}]}", {"job 1", "magic"});
   expect_manifest_error(std::string("{\"jobs\": [{") + kTiny + ", \"voxels\": \"lots\"}]}", {"job 1", "lots"});
