@@ -18,8 +18,8 @@ SolverComparisonResult compare_solvers(const TetMesh4& mesh, const Eigen::Vector
   const DirichletSystem system = dirichlet_system(mesh);
   result.assemble_seconds = system.assemble_seconds;
   // The CG backends get solve_harmonic's deflation too (the others ignore it).
-  const DeflationSpace deflation =
-      space_time_cells(mesh, system.unknown, int(system.A.rows()), options.deflation_cell_voxels);
+  const DeflationSpace deflation = space_time_cells(mesh, system.unknown, int(system.A.rows()),
+                                                    options.deflation_cell_voxels, kMaxDeflationColumns, &system.A);
   for (const std::string& name : backends) {
     const std::unique_ptr<LinearSolver> solver = make_solver(name, options.solve);
     // The same start as solve_harmonic's, so iteration counts compare like for like.

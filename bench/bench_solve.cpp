@@ -166,7 +166,8 @@ void BM_MapSolve(benchmark::State& state, const Case& c, double cell_voxels) {
   for (auto _ : state) {
     auto solver = morphmap::make_solver("cg-amg", options);
     Eigen::VectorXd x = s.x0;
-    solver->set_deflation(morphmap::space_time_cells(system.mesh, s.unknown, int(s.A.rows()), cell_voxels));
+    solver->set_deflation(morphmap::space_time_cells(system.mesh, s.unknown, int(s.A.rows()), cell_voxels,
+                                                     morphmap::kMaxDeflationColumns, &s.A));
     solver->compute(s.A);
     report = solver->solve(s.b, x);
     benchmark::DoNotOptimize(x.data());

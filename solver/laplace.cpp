@@ -330,8 +330,81 @@ DirichletSystem dirichlet_system(const TetMesh4& mesh, const SharedStars& stars,
 
 namespace {
 
+/// Splits each cell of `sorted` (grouped by cell) into the connected parts of its unknowns along the couplings of A
+/// (symmetric, compressed, so each column's rows are sorted), numbers the parts within the cell in the order the
+/// cell's unknowns are sorted, and regroups the cell by part (a stable sort, keeping each part's order). Written by
+/// hand: the sets are a union-find restricted to each cell, which no library here offers for a sparse matrix.
+template <class Point>
+void split_cells(const SparseMatrixD& A, std::vector<Point>& sorted) {
+  std::vector<std::size_t> begin;
+  for (std::size_t k = 0; k < sorted.size(); ++k)
+    if (k == 0 || sorted[k].cell != sorted[k - 1].cell) begin.push_back(k);
+  begin.push_back(sorted.size());
+  const std::size_t cells = begin.size() - 1;
+  // Per unknown its cell's rank: 4 bytes, read at random by the search (the Points are 24).
+  std::vector<int> cell(sorted.size()), part(sorted.size(), -1);
+  tbb::parallel_for(tbb::blocked_range<std::size_t>(0, cells, 16), [&](const auto& r) {
+    for (std::size_t c = r.begin(); c != r.end(); ++c)
+      for (std::size_t k = begin[c]; k < begin[c + 1]; ++k) cell[std::size_t(sorted[k].index)] = int(c);
+  });
+  // Union-find over each coupling within a cell once (A's rows are sorted, so a row's upper half follows its
+  // diagonal), a set's root its smallest unknown, which makes the roots independent of the order of the unions. Row
+  // blocks join their own couplings side by side (a union there writes only the block's entries); the couplings
+  // between blocks, few because a row's columns lie near it, are joined after them. A set never leaves its cell, so
+  // the per-cell pass below touches disjoint entries too.
+  const int* outer = A.outerIndexPtr();
+  const int* inner = A.innerIndexPtr();
+  const int n = int(sorted.size());
+  std::vector<int> parent(sorted.size());
+  std::iota(parent.begin(), parent.end(), 0);
+  auto find = [&](int a) {
+    while (parent[std::size_t(a)] != a) {
+      parent[std::size_t(a)] = parent[std::size_t(parent[std::size_t(a)])];
+      a = parent[std::size_t(a)];
+    }
+    return a;
+  };
+  auto join = [&](int a, int b) {
+    const int x = find(a), y = find(b);
+    if (x != y) parent[std::size_t(std::max(x, y))] = std::min(x, y);
+  };
+  constexpr int kUnionRows = 8192;
+  const int blocks = (n + kUnionRows - 1) / kUnionRows;
+  std::vector<std::vector<std::pair<int, int>>> between(static_cast<std::size_t>(blocks));
+  tbb::parallel_for(0, blocks, [&](int block) {
+    const int first = block * kUnionRows, last = std::min(n, first + kUnionRows);
+    for (int i = first; i < last; ++i) {
+      const int own = cell[std::size_t(i)];
+      for (const int* e = std::upper_bound(inner + outer[i], inner + outer[i + 1], i); e != inner + outer[i + 1]; ++e) {
+        if (cell[std::size_t(*e)] != own) continue;
+        if (*e < last)
+          join(i, *e);
+        else
+          between[std::size_t(block)].emplace_back(i, *e);
+      }
+    }
+  });
+  for (const auto& pairs : between)
+    for (const auto& [a, b] : pairs) join(a, b);
+  tbb::parallel_for(tbb::blocked_range<std::size_t>(0, cells, 2), [&](const auto& r) {
+    for (std::size_t c = r.begin(); c != r.end(); ++c) {
+      // Parts numbered in the order the cell's unknowns are sorted (part: a root's number).
+      int parts = 0;
+      for (std::size_t k = begin[c]; k < begin[c + 1]; ++k) {
+        const int root = find(sorted[k].index);
+        if (part[std::size_t(root)] < 0) part[std::size_t(root)] = parts++;
+        sorted[k].part = part[std::size_t(root)];
+      }
+      if (parts > 1)
+        std::stable_sort(sorted.begin() + std::ptrdiff_t(begin[c]), sorted.begin() + std::ptrdiff_t(begin[c + 1]),
+                         [](const Point& a, const Point& b) { return a.part < b.part; });
+    }
+  });
+}
+
 /// space_time_cells for one cell size.
-DeflationSpace cells_of(const TetMesh4& mesh, const std::vector<int>& unknown, int unknowns, double cell_voxels) {
+DeflationSpace cells_of(const TetMesh4& mesh, const std::vector<int>& unknown, int unknowns, double cell_voxels,
+                        const SparseMatrixD* couplings) {
   DeflationSpace space;
   const double size = cell_voxels * mesh.voxel_size;
   if (!(size > 0.0) || unknowns == 0 || mesh.vertex_count() == 0) return space;
@@ -342,6 +415,7 @@ DeflationSpace cells_of(const TetMesh4& mesh, const std::vector<int>& unknown, i
     std::int64_t cell;
     double u;
     int index;
+    int part;  // the connected part of the cell (split_cells), 0 without couplings
   };
   std::vector<Point> points(static_cast<std::size_t>(unknowns));
   const Eigen::Index n = mesh.vertex_count();
@@ -355,12 +429,13 @@ DeflationSpace cells_of(const TetMesh4& mesh, const std::vector<int>& unknown, i
       key = key * kCellsPerAxis + std::clamp<std::int64_t>(c, 0, kCellsPerAxis - 1);
     }
     const double u = std::clamp(mesh.time_of(v), 0.0, 1.0) * levels;
-    points[static_cast<std::size_t>(i)] = {key, u, i};
+    points[static_cast<std::size_t>(i)] = {key, u, i, 0};
   });
   std::vector<Point> sorted = points;
   tbb::parallel_sort(sorted.begin(), sorted.end(), [](const Point& a, const Point& b) {
     return a.cell != b.cell ? a.cell < b.cell : a.u != b.u ? a.u < b.u : a.index < b.index;
   });
+  if (couplings != nullptr) split_cells(*couplings, sorted);
   // Per cell, its hats in increasing level, each kept when an unknown of the cell lies where the hat is at least
   // kSeparation, at a t past the one the previous kept hat took by at least kSeparation intervals: then the cell's
   // columns are independent (the square matrix of the kept hats at the points they took is totally positive with
@@ -373,7 +448,8 @@ DeflationSpace cells_of(const TetMesh4& mesh, const std::vector<int>& unknown, i
   std::int64_t cells = 0;
   for (std::size_t first = 0; first < sorted.size();) {
     std::size_t last = first;
-    while (last < sorted.size() && sorted[last].cell == sorted[first].cell) ++last;
+    while (last < sorted.size() && sorted[last].cell == sorted[first].cell && sorted[last].part == sorted[first].part)
+      ++last;
     const std::size_t base = kept.size();
     kept.resize(base + std::size_t(levels) + 1, kDropped);
     double taken = -std::numeric_limits<double>::infinity();
@@ -418,11 +494,13 @@ DeflationSpace cells_of(const TetMesh4& mesh, const std::vector<int>& unknown, i
 }  // namespace
 
 DeflationSpace space_time_cells(const TetMesh4& mesh, const std::vector<int>& unknown, int unknowns, double cell_voxels,
-                                int max_columns) {
-  DeflationSpace space = cells_of(mesh, unknown, unknowns, cell_voxels);
+                                int max_columns, const SparseMatrixD* couplings) {
+  if (couplings != nullptr && (couplings->rows() != unknowns || couplings->cols() != unknowns))
+    throw InvalidInput("space_time_cells: the couplings matrix must be #unknowns by #unknowns");
+  DeflationSpace space = cells_of(mesh, unknown, unknowns, cell_voxels, couplings);
   for (double voxels = cell_voxels; space.columns > std::max(1, max_columns);) {
     voxels *= 1.5;
-    space = cells_of(mesh, unknown, unknowns, voxels);
+    space = cells_of(mesh, unknown, unknowns, voxels, couplings);
   }
   return space;
 }
@@ -447,7 +525,8 @@ LaplaceResult solve_harmonic(const TetMesh4& mesh, const LaplaceOptions& options
   // Direct backends ignore x; the iterative ones (gauss-seidel included) start from it.
   Eigen::VectorXd x = options.warm_start ? std::move(system.x0) : Eigen::VectorXd::Zero(system.A.rows());
   if (result.unknowns > 0) {
-    solver->set_deflation(space_time_cells(mesh, system.unknown, int(result.unknowns), options.deflation_cell_voxels));
+    solver->set_deflation(space_time_cells(mesh, system.unknown, int(result.unknowns), options.deflation_cell_voxels,
+                                           kMaxDeflationColumns, &system.A));
     solver->compute(std::move(system.A));  // handed over, not copied: A is not needed after this
     result.report = solver->solve(system.b, x);
     for (Eigen::Index i = 0; i < result.s.size(); ++i) {

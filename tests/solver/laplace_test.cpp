@@ -488,6 +488,41 @@ TEST(LaplaceDeflation, SpaceTimeCellsAreIndependentHatsInTime) {
   EXPECT_LT(capped.columns, space.columns);
 }
 
+TEST(LaplaceDeflation, CellsSplitIntoTheirConnectedParts) {
+  // Two parallel slabs half a voxel apart share every cell; with the couplings each cell gets one set of hats per
+  // slab, every column's support within one slab, and a connected slab's space is the same with or without them.
+  const TetMesh4 a = test::make_slab_mesh(12, 4);
+  TetMesh4 b = a;
+  b.V.col(2).array() += 0.5 * a.voxel_size;
+  const TetMesh4 sheets = test::merge_meshes(a, b);
+  const DirichletSystem one = dirichlet_system(a), two = dirichlet_system(sheets);
+  const int n1 = int(one.A.rows()), n2 = int(two.A.rows());
+  const DeflationSpace single = space_time_cells(a, one.unknown, n1, 6.0);
+  const DeflationSpace single_split = space_time_cells(a, one.unknown, n1, 6.0, kMaxDeflationColumns, &one.A);
+  ASSERT_GT(single.columns, 0);
+  EXPECT_EQ(single_split.columns, single.columns);
+  EXPECT_EQ(single_split.column, single.column);
+  EXPECT_EQ(single_split.weight, single.weight);
+  const DeflationSpace merged = space_time_cells(sheets, two.unknown, n2, 6.0);
+  const DeflationSpace split = space_time_cells(sheets, two.unknown, n2, 6.0, kMaxDeflationColumns, &two.A);
+  EXPECT_EQ(merged.columns, single.columns);
+  EXPECT_EQ(split.columns, 2 * single.columns);
+  // The slab each column's unknowns come from: b's vertices follow a's.
+  std::vector<int> slab_of_column(std::size_t(split.columns), -1);
+  for (Eigen::Index v = 0; v < sheets.V.rows(); ++v) {
+    const int u = two.unknown[std::size_t(v)];
+    if (u < 0) continue;
+    const int slab = v < a.V.rows() ? 0 : 1;
+    for (int e = 0; e < 2; ++e) {
+      const int c = split.column(u, e);
+      if (c < 0) continue;
+      if (slab_of_column[std::size_t(c)] < 0) slab_of_column[std::size_t(c)] = slab;
+      EXPECT_EQ(slab_of_column[std::size_t(c)], slab) << "column " << c << " spans both slabs";
+    }
+  }
+  EXPECT_THROW(space_time_cells(sheets, two.unknown, n2, 6.0, kMaxDeflationColumns, &one.A), InvalidInput);
+}
+
 TEST(LaplaceDeflation, CellWithFewUnknownsKeepsIndependentHats) {
   // One cell, three unknowns at t = 0.3, 0.3 and 0.35 of a 1-interval morph: the hats of levels 0 and 1 both
   // reach them. Kept by Schoenberg-Whitney: hat 0 takes t = 0.3, hat 1 needs a later t, 0.35 (0.3 again would make
