@@ -359,19 +359,12 @@ void prepare_job_folder(const fs::path& dir, const BatchJob& job) {
   write_text_atomically((dir / "job.json").string(), job_record(job));
 }
 
-// Stage names in the order `map --progress` prints them (app/pipeline.cpp), to show the one running.
-const std::vector<std::string> kStages = {"load",     "morph",     "extract", "quality",  "laplace", "compare",
-                                          "gradient", "transport", "map",     "transfer", "write"};
-
-// The stage after `finished`, or "" when `finished` is not a stage name. A job runs "compare" only with
-// --compare-solvers and "transport" (the upwind sweep) only with --method upwind.
-std::string next_stage(const std::string& finished, bool compares, bool upwind) {
-  auto it = std::find(kStages.begin(), kStages.end(), finished);
-  if (it == kStages.end()) return {};
-  ++it;
-  if (it != kStages.end() && *it == "compare" && !compares) ++it;
-  if (it != kStages.end() && *it == "transport" && !upwind) ++it;
-  return it == kStages.end() ? std::string("finishing") : *it;
+// The stage after the one a progress line (without its "[morphmap] " tag) reports finished, "finishing" after the
+// last, or "" when the line names no planned stage.
+std::string next_stage(const std::string& line, const std::vector<std::string>& plan) {
+  for (std::size_t k = 0; k < plan.size(); ++k)
+    if (line.rfind(plan[k] + " ", 0) == 0) return k + 1 < plan.size() ? plan[k + 1] : std::string("finishing");
+  return {};
 }
 
 std::string seconds_text(double s) {
@@ -386,6 +379,24 @@ void write_summary(const std::string& dir, const std::vector<SummaryRow>& rows) 
 }
 
 }  // namespace
+
+std::vector<std::string> planned_stages(const std::vector<std::string>& args) {
+  const auto flag = std::find(args.begin(), args.end(), "--method");
+  const std::string method = flag != args.end() && flag + 1 != args.end() ? *(flag + 1) : "trace";
+  const auto has = [&](const char* name) { return std::find(args.begin(), args.end(), name) != args.end(); };
+  const auto repair = std::find(args.begin(), args.end(), "--fold-repair");
+  const bool closest = method == "closest-point";
+  std::vector<std::string> stages = {"load", "morph", "extract", closest ? "quality" : "laplace"};
+  if (has("--critical-points")) stages.emplace_back("critical points");
+  if (has("--compare-solvers") && !closest) stages.emplace_back("compare");
+  if (!closest) stages.emplace_back("gradient");
+  if (method == "upwind") stages.emplace_back("transport");
+  stages.emplace_back("map");
+  if (!closest && !(repair != args.end() && repair + 1 != args.end() && *(repair + 1) == "off"))
+    stages.emplace_back("repair");
+  for (const char* rest : {"transfer", "seams", "write"}) stages.emplace_back(rest);
+  return stages;
+}
 
 std::vector<BatchJob> parse_manifest(const std::string& text, const std::string& path) {
   json manifest;
@@ -611,19 +622,14 @@ BatchResult run_batch(const BatchOptions& options) {
     std::vector<std::string> argv = {options.executable, "map"};
     argv.insert(argv.end(), job.args.begin(), job.args.end());
     argv.insert(argv.end(), {"-o", dir.string(), "--progress"});
-    const bool compares = std::find(job.args.begin(), job.args.end(), "--compare-solvers") != job.args.end();
-    const auto method = std::find(job.args.begin(), job.args.end(), "--method");
-    const bool upwind = method != job.args.end() && method + 1 != job.args.end() && *(method + 1) == "upwind";
+    const std::vector<std::string> plan = planned_stages(job.args);
     std::string stage = "load";
     const ChildOutcome run = run_child(
         argv, (dir / "map.log").string(),
         [&](const std::string& line) {
           const std::string tag = "[morphmap] ";
           if (line.rfind(tag, 0) != 0) return;
-          std::istringstream words(line.substr(tag.size()));
-          std::string finished;
-          words >> finished;
-          const std::string next = next_stage(finished, compares, upwind);
+          const std::string next = next_stage(line.substr(tag.size()), plan);
           if (!next.empty()) stage = next;
         },
         [&](double seconds) {

@@ -26,6 +26,11 @@ std::vector<BatchJob> read_manifest(const std::string& path);
 /// The same from the manifest's text; `path` names it in messages and anchors relative mesh paths.
 std::vector<BatchJob> parse_manifest(const std::string& text, const std::string& path);
 
+/// The stages `map --progress` reports for these `map` arguments (a job's args), in the order it reports them
+/// (app/pipeline.cpp's run_pipeline): the batch's status line names the stage after the last one reported as the one
+/// running. tests/app/batch_test.cpp checks the list against real runs.
+std::vector<std::string> planned_stages(const std::vector<std::string>& map_args);
+
 /// One row of summary.csv / summary.md: Table II's columns plus total time and peak memory. Numbers that do
 /// not apply (no diffusion solve, failed job) are absent.
 struct SummaryRow {

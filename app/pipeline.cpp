@@ -812,7 +812,7 @@ PipelineResult run_pipeline(const PipelineOptions& options) {
   Eigen::MatrixXd target_seam_labels;  // the 4D labels the target's seam split reads, when the repair moved some
   std::vector<char> relabelled;        // B's vertices the repair moved (the seam split keeps their triangles whole)
   const bool repair = options.untangle.enabled && !closest_point;
-  if (repair) {  // off (the default), not even its classification runs: a closest-point query per triangle
+  if (repair) {  // off, not even its classification runs: a closest-point query per triangle
     UntangleOptions untangle_options = options.untangle;
     untangle_options.seam_threshold = options.seams.label_threshold;
     const Eigen::MatrixXd before = points_of(hits);

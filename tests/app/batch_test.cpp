@@ -277,6 +277,35 @@ TEST_F(Batch, SummaryRowTakesDiffusionAndSolveFromEitherSide) {
   EXPECT_EQ(table[3].back(), failed.error);
 }
 
+TEST_F(Batch, PlannedStagesAreTheStagesMapReports) {
+  // The status line names the stage after the last one `map --progress` reported; the plan it reads that from must be
+  // what map really reports, for every option that adds or drops a stage.
+  const std::vector<std::string> variants = {
+      "", ", \"fold-repair\": \"off\"", ", \"method\": \"upwind\", \"critical-points\": true",
+      ", \"method\": \"closest-point\"", ", \"compare-solvers\": [\"gauss-seidel\"], \"fold-repair\": \"off\""};
+  for (std::size_t v = 0; v < variants.size(); ++v) {
+    const std::vector<BatchJob> jobs =
+        parse_manifest(std::string("{\"jobs\": [{") + kTiny + variants[v] + "}]}", (dir_ / "m.json").string());
+    ASSERT_EQ(jobs.size(), 1u);
+    std::string args;
+    for (const std::string& a : jobs[0].args) args += " '" + a + "'";
+    const fs::path out = dir_ / ("run" + std::to_string(v));
+    const CommandRun r = run_command("map" + args + " --progress -o " + out.string());
+    ASSERT_EQ(r.status, 0) << r.output;
+    std::vector<std::string> reported;
+    std::istringstream lines(r.output);
+    const std::string tag = "[morphmap] ";
+    for (std::string line; std::getline(lines, line);) {
+      if (line.rfind(tag, 0) != 0 || line.find(" s  (elapsed ") == std::string::npos) continue;  // not "wrote ..."
+      std::string name = line.substr(tag.size(), line.find("  ", tag.size()) - tag.size());
+      // The name is padded to 10 characters before the seconds: cut at the first digit after it.
+      name = name.substr(0, name.find_last_not_of(" 0123456789.") + 1);
+      reported.push_back(name);
+    }
+    EXPECT_EQ(reported, planned_stages(jobs[0].args)) << "variant " << v << ":" << args << "\n" << r.output;
+  }
+}
+
 TEST_F(Batch, BadManifestRunsNothing) {
   const fs::path m = write("m.json", std::string("{\"jobs\": [{") + kTiny + "}, {\"source\": \"sphere\"}]}");
   const CommandRun r = run_command("batch " + m.string() + " -o " + (dir_ / "out").string());
