@@ -381,10 +381,13 @@ void write_summary(const std::string& dir, const std::vector<SummaryRow>& rows) 
 }  // namespace
 
 std::vector<std::string> planned_stages(const std::vector<std::string>& args) {
-  const auto flag = std::find(args.begin(), args.end(), "--method");
-  const std::string method = flag != args.end() && flag + 1 != args.end() ? *(flag + 1) : "trace";
   const auto has = [&](const char* name) { return std::find(args.begin(), args.end(), name) != args.end(); };
-  const auto repair = std::find(args.begin(), args.end(), "--fold-repair");
+  // An option's value, or `otherwise` when the option is not given.
+  const auto value = [&](const char* name, const char* otherwise) {
+    const auto at = std::find(args.begin(), args.end(), name);
+    return at != args.end() && at + 1 != args.end() ? *(at + 1) : std::string(otherwise);
+  };
+  const std::string method = value("--method", "trace");
   const bool closest = method == "closest-point";
   std::vector<std::string> stages = {"load", "morph", "extract", closest ? "quality" : "laplace"};
   if (has("--critical-points")) stages.emplace_back("critical points");
@@ -392,8 +395,7 @@ std::vector<std::string> planned_stages(const std::vector<std::string>& args) {
   if (!closest) stages.emplace_back("gradient");
   if (method == "upwind") stages.emplace_back("transport");
   stages.emplace_back("map");
-  if (!closest && !(repair != args.end() && repair + 1 != args.end() && *(repair + 1) == "off"))
-    stages.emplace_back("repair");
+  if (!closest && value("--fold-repair", "on") != "off") stages.emplace_back("repair");
   for (const char* rest : {"transfer", "seams", "write"}) stages.emplace_back(rest);
   return stages;
 }

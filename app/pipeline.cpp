@@ -812,7 +812,7 @@ PipelineResult run_pipeline(const PipelineOptions& options) {
   Eigen::MatrixXd target_seam_labels;  // the 4D labels the target's seam split reads, when the repair moved some
   std::vector<char> relabelled;        // B's vertices the repair moved (the seam split keeps their triangles whole)
   const bool repair = options.untangle.enabled && !closest_point;
-  if (repair) {  // off, not even its classification runs: a closest-point query per triangle
+  if (repair) {  // when off, not even its classification runs (a closest-point query per triangle)
     UntangleOptions untangle_options = options.untangle;
     untangle_options.seam_threshold = options.seams.label_threshold;
     const Eigen::MatrixXd before = points_of(hits);
@@ -1153,7 +1153,7 @@ PipelineResult run_pipeline(const PipelineOptions& options) {
                      {"rate_evaluations", traced_total.rate_evaluations},
                      {"descent_pieces", traced_total.descent_pieces},
                      {"seconds", traced_total.seconds},
-                     {"setup_seconds", tracer ? tracer->setup_seconds() : 0.0},
+                     {"setup_seconds", tracer_setup_seconds},
                      {"fallback",
                       "a trace whose flow stalls continues down the steepest descent of s (descended); one that "
                       "still cannot reach A (s flat) takes the point of A where it stopped (stalled)"}};
