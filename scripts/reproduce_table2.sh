@@ -52,7 +52,8 @@ cow-horse|Cow to Horse|1692940|10|7|41|0.00250|-|-|-|10|50'
 echo
 echo "Table II: paper (2 GHz AMD PC) above ours ($(nproc) cores, $(uname -m)). Paper total = the seconds its row lists"
 echo "(diffusion + implicit + label propagation); ours = the map end to end with the converged default solve (load, morph,"
-echo "extraction, solve, transport, outputs), the Gauss-Seidel comparison not included: the median of $runs runs (their"
+echo "extraction, solve, transport, outputs: report.json's total; the process's start and exit, about 0.1 s, are outside"
+echo "it), the Gauss-Seidel comparison not included: the median of $runs runs (their"
 echo "range in brackets); ratio = paper / that median. The other columns are the first run's; the last is its whole job"
 echo "with the comparison diffusion, wall and CPU seconds (on a shared machine wall >> CPU / cores)."
 echo
