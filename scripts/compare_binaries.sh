@@ -3,7 +3,8 @@
 # README is measured: the machines are shared and noisy (a run after a few idle seconds is 10-20% slower than one
 # straight after another), so single runs of each binary say little. The two binaries run alternately, each round
 # the whole batch of jobs with one binary then the other (the order swapped every round), and the script prints
-# every stage's median and range per binary from report.json's `seconds`, the solver's iterations and the tracer's
+# every stage's median and range per binary from report.json's `seconds`, the process's CPU seconds (the same work
+# costs the same CPU time unless the machine slows it), the solver's iterations and the tracer's
 # rate evaluations, and how far the new binary's labels are from the old one's (bitwise the same, or the median
 # and largest distance in units of the labels' bounding-box diagonal).
 #   usage: scripts/compare_binaries.sh MODELS_DIR OLD_BINARY NEW_BINARY [ROUNDS] [JOB...]
@@ -112,6 +113,12 @@ for job in jobs:
             continue
         ratio = statistics.median(n) / statistics.median(o) if statistics.median(o) > 0 else float("nan")
         print(f"| {stage} | {fmt(o)} | {fmt(n)} | {ratio:.3f} |")
+    # The process's CPU seconds (user and system): the same work gives the same figure unless the machine slows it,
+    # so a stage that is slower with a higher CPU figure on both sides says more about the machine than the code.
+    o = [x["cpu_seconds"] for x in reports["old"] if "cpu_seconds" in x]
+    n = [x["cpu_seconds"] for x in reports["new"] if "cpu_seconds" in x]
+    if o and n:
+        print(f"| CPU s (process) | {fmt(o)} | {fmt(n)} | {statistics.median(n) / statistics.median(o):.3f} |")
     for name, get in (("solver iterations", lambda x: x.get("solver", {}).get("iterations")),
                       ("trace rate evaluations", lambda x: x.get("trace", {}).get("rate_evaluations")),
                       ("peak memory MB", lambda x: (x.get("peak_memory_bytes") or 0) / 2**20)):
