@@ -39,6 +39,13 @@ echo
 echo "| morph | who | tets | steps | diffusion (iters, s, conv) | implicit/direct (iters, s, residual) | label prop (passes, s) | total s [range] | ratio | maps' CPU s | with GS: wall s, CPU s |"
 echo "|---|---|--:|--:|---|---|---|--:|--:|--:|---|"
 awk -F',' -v paper="$paper" -v first="$1" '
+  # Runs a[job, 1..m] sorted in place (insertion sort: a handful of runs), their median and " [min–max]" when m > 1.
+  function sort_runs(a, job, m,    i, j, x) {
+    for (i = 2; i <= m; ++i)
+      for (j = i; j > 1 && a[job, j - 1] > a[job, j]; --j) { x = a[job, j]; a[job, j] = a[job, j - 1]; a[job, j - 1] = x }
+  }
+  function median(a, job, m) { return m % 2 ? a[job, (m + 1) / 2] : (a[job, m / 2] + a[job, m / 2 + 1]) / 2 }
+  function spread(a, job, m) { return m > 1 ? sprintf(" [%.2f–%.2f]", a[job, 1], a[job, m]) : "" }
   BEGIN {
     n = split(paper, lines, "\n")
     for (i = 1; i <= n; ++i) { split(lines[i], f, "|"); order[i] = f[1]; row[f[1]] = lines[i] }
@@ -56,15 +63,12 @@ awk -F',' -v paper="$paper" -v first="$1" '
       if (!(job in seen)) { printf "| | ours | not run | | | | | | | | |\n"; continue }
       if (v[job, col["status"]] != "ok") { printf "| | ours | %s: %s | | | | | | | | |\n", v[job, col["status"]], v[job, col["error"]]; continue }
       m = count[job]
-      for (a = 2; a <= m; ++a)  # insertion sort of the runs map times
-        for (b = a; b > 1 && times[job, b - 1] > times[job, b]; --b) { x = times[job, b]; times[job, b] = times[job, b - 1]; times[job, b - 1] = x }
-      t = m % 2 ? times[job, (m + 1) / 2] : (times[job, m / 2] + times[job, m / 2 + 1]) / 2
-      range = m > 1 ? sprintf(" [%.2f–%.2f]", times[job, 1], times[job, m]) : ""
+      sort_runs(times, job, m)
+      t = median(times, job, m)
+      range = spread(times, job, m)
       k = cpu_count[job]
-      for (a = 2; a <= k; ++a)
-        for (b = a; b > 1 && cpus[job, b - 1] > cpus[job, b]; --b) { x = cpus[job, b]; cpus[job, b] = cpus[job, b - 1]; cpus[job, b - 1] = x }
-      cpu = k == 0 ? "–" : sprintf("%.2f", k % 2 ? cpus[job, (k + 1) / 2] : (cpus[job, k / 2] + cpus[job, k / 2 + 1]) / 2)
-      if (k > 1) cpu = cpu sprintf(" [%.2f–%.2f]", cpus[job, 1], cpus[job, k])
+      sort_runs(cpus, job, k)
+      cpu = k == 0 ? "–" : sprintf("%.2f", median(cpus, job, k)) spread(cpus, job, k)
       printf "| | ours | %s | %s | %s, %.2f, %.2g | %s %s, %.2f, %.2g | %s, %.2f | %.2f%s | %.1f× | %s | %.2f, %.2f |\n",
         v[job, col["tets"]], v[job, col["time_steps"]],
         v[job, col["diffusion_iterations"]] (v[job, col["diffusion_iterations"]] >= 20000 ? " (cap)" : ""),

@@ -78,6 +78,9 @@ struct DirichletSystem {
 DirichletSystem dirichlet_system(const TetMesh4& mesh, const SharedStars& stars = nullptr,
                                  QualityResult* quality = nullptr);
 
+/// space_time_cells' default max_columns.
+constexpr int kMaxDeflationColumns = 20000;
+
 /// The coarse space that deflates the solve (DeflationSpace): functions piecewise constant on cubes of
 /// `cell_voxels` lattice voxels in space and piecewise linear in t between the lattice's time levels (the hats of
 /// the K + 1 levels), restricted to the unknowns (`unknown`: #V, a vertex's unknown or -1). CG's slow modes on these
@@ -94,7 +97,6 @@ DirichletSystem dirichlet_system(const TetMesh4& mesh, const SharedStars& stars 
 /// (the horse's legs, the sides of a thin part), and one column for both ties values that the solve keeps apart. On cow
 /// -> horse the split takes cg-amg from 34 to 29 iterations (1309 -> 1347 columns); the other Table II morphs
 /// keep their iteration counts within one. Throws InvalidInput for a couplings matrix of another size.
-constexpr int kMaxDeflationColumns = 20000;
 DeflationSpace space_time_cells(const TetMesh4& mesh, const std::vector<int>& unknown, int unknowns, double cell_voxels,
                                 int max_columns = kMaxDeflationColumns, const SparseMatrixD* couplings = nullptr);
 
