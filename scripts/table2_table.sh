@@ -25,14 +25,13 @@ sphere-buddha|Sphere to Buddha|1360634|10|93|61|0.00012|-|-|-|6|25
 cow-horse|Cow to Horse|1692940|10|7|41|0.00250|-|-|-|10|50'
 
 echo
+if ((runs > 1)); then timed="runs 2 to $runs; median [range]"; else timed="none with RUNS = 1"; fi
 echo "Table II: paper (2 GHz AMD PC) above ours ($(nproc) cores, $(uname -m)). Paper total = the seconds its row lists"
 echo "(diffusion + implicit + label propagation); ours = the map end to end with the converged default solve (load, morph,"
 echo "extraction, solve, transport, outputs: report.json's total; the process's start and exit, about 0.1 s, are outside"
-echo "it), the Gauss-Seidel comparison not included: the median of $runs runs (their"
-echo "range in brackets); ratio = paper / that median. Maps' CPU s: the CPU seconds (user and system, the whole process) of"
-echo "the maps timed without the comparison"
-if ((runs > 1)); then timed="runs 2 to $runs; median [range]"; else timed="none with RUNS = 1"; fi
-echo "($timed): the same work in every run, so a larger figure means a machine slowed by its"
+echo "it), the Gauss-Seidel comparison not included: the median of $runs runs (their range in brackets); ratio = paper /"
+echo "that median. Maps' CPU s: the CPU seconds (user and system, the whole process) of the maps timed without the"
+echo "comparison ($timed): the same work in every run, so a larger figure means a machine slowed by its"
 echo "neighbours, not more work. The other columns are the first run's; the last is its whole job with the comparison"
 echo "diffusion, wall and CPU seconds (on a shared machine wall >> CPU / cores)."
 echo
