@@ -133,10 +133,11 @@ const std::vector<Column> kColumns = {{"job", "job", "---"},
                                       {"map_seconds", "map s", "--:"},
                                       {"total_seconds", "total s", "--:"},
                                       {"cpu_seconds", "cpu s", "--:"},
+                                      {"system_cpu_seconds", "sys s", "--:"},
                                       {"peak_memory_bytes", "peak memory", "--:"},
                                       {"warnings", "warnings", "---"},
                                       {"error", "error", "---"}};
-constexpr std::size_t kPeakMemoryColumn = 16;
+constexpr std::size_t kPeakMemoryColumn = 17;
 
 std::vector<std::string> cells(const SummaryRow& r) {
   return {r.job,
@@ -155,6 +156,7 @@ std::vector<std::string> cells(const SummaryRow& r) {
           number(r.map_seconds, 4),
           number(r.total_seconds, 4),
           number(r.cpu_seconds, 4),
+          number(r.system_cpu_seconds, 4),
           integer(r.peak_memory_bytes),
           r.warnings,
           r.error};
@@ -544,6 +546,7 @@ SummaryRow summary_row(const std::string& job, const std::string& report_json) {
   row.total_seconds = optional_at<double>(r, "/seconds/total"_json_pointer);
   row.peak_memory_bytes = optional_at<std::int64_t>(r, "/peak_memory_bytes"_json_pointer);
   row.cpu_seconds = optional_at<double>(r, "/cpu_seconds"_json_pointer);
+  row.system_cpu_seconds = optional_at<double>(r, "/system_cpu_seconds"_json_pointer);
   if (row.total_seconds)
     row.map_seconds = *row.total_seconds - optional_at<double>(r, "/seconds/compare"_json_pointer).value_or(0.0);
   for (const json::json_pointer& list : {"/inputs/warnings"_json_pointer, "/topology/warnings"_json_pointer})

@@ -47,9 +47,10 @@ struct SummaryRow {
   std::optional<double> solve_residual;      ///< relative residual |b - Ax| / |b|
   std::optional<std::int64_t> label_passes;  ///< transport's dependency wavefronts (sequential passes)
   std::optional<double> label_seconds;
-  std::optional<double> map_seconds;    ///< the map end to end: total_seconds less the comparison solves
-  std::optional<double> total_seconds;  ///< the whole job, comparison solves included
-  std::optional<double> cpu_seconds;    ///< the job's CPU time (user + system, all threads)
+  std::optional<double> map_seconds;         ///< the map end to end: total_seconds less the comparison solves
+  std::optional<double> total_seconds;       ///< the whole job, comparison solves included
+  std::optional<double> cpu_seconds;         ///< the job's CPU time (user + system, all threads)
+  std::optional<double> system_cpu_seconds;  ///< the system (kernel) part of cpu_seconds
   std::optional<std::int64_t> peak_memory_bytes;
   std::string warnings;  ///< report.json's topology warnings, joined by "; " (the lattice changed A's or B's topology)
   std::string error;     ///< failed: the job's one-line error

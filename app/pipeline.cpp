@@ -1283,6 +1283,10 @@ PipelineResult run_pipeline(const PipelineOptions& options) {
     ::getrusage(RUSAGE_SELF, &usage);
     report["cpu_seconds"] = double(usage.ru_utime.tv_sec + usage.ru_stime.tv_sec) +
                             1e-6 * double(usage.ru_utime.tv_usec + usage.ru_stime.tv_usec);
+    // The kernel's part apart: on our virtual machines it is nearly all first touches of memory, which cost 20 times
+    // more when the host has taken the pages back (docs/performance_log.md, 2026-12-07 from 20:06 UTC), and it is
+    // most of what varies from run to run of the same map.
+    report["system_cpu_seconds"] = double(usage.ru_stime.tv_sec) + 1e-6 * double(usage.ru_stime.tv_usec);
   }
   report["memory_estimate_bytes"] = memory_estimate;
   // The allocator settings change the run time by a third on our machines (app/allocator.h), so every report says

@@ -31,8 +31,9 @@ echo "(diffusion + implicit + label propagation); ours = the map end to end with
 echo "extraction, solve, transport, outputs: report.json's total; the process's start and exit, about 0.1 s, are outside"
 echo "it), the Gauss-Seidel comparison not included: the median of $runs runs (their range in brackets); ratio = paper /"
 echo "that median. Maps' CPU s: the CPU seconds (user and system, the whole process) of the maps timed without the"
-echo "comparison ($timed): the same work in every run, so a larger figure means a machine slowed by its"
-echo "neighbours, not more work. The other columns are the first run's; the last is its whole job with the comparison"
+echo "comparison ($timed), and the system (kernel) part of them: the same work in every run, so a larger figure"
+echo "means a slower machine, not more work (the system part is nearly all first touches of memory, which cost about 20"
+echo "times more when the host has taken the pages back). The other columns are the first run's; the last is its whole job with the comparison"
 echo "diffusion, wall and CPU seconds (on a shared machine wall >> CPU / cores)."
 echo
 echo "| morph | who | tets | steps | diffusion (iters, s, conv) | implicit/direct (iters, s, residual) | label prop (passes, s) | total s [range] | ratio | maps' CPU s | with GS: wall s, CPU s |"
@@ -49,10 +50,14 @@ awk -F',' -v paper="$paper" -v first="$1" '
     n = split(paper, lines, "\n")
     for (i = 1; i <= n; ++i) { split(lines[i], f, "|"); order[i] = f[1]; row[f[1]] = lines[i] }
   }
-  FNR == 1 { for (c = 1; c <= NF; ++c) col[$c] = c; next }
+  FNR == 1 { split("", col); for (c = 1; c <= NF; ++c) col[$c] = c; next }
   FILENAME == first { seen[$1] = 1; for (c = 1; c <= NF; ++c) v[$1, c] = $c }
   $col["status"] == "ok" { times[$1, ++count[$1]] = $col["map_seconds"] + 0 }
-  FILENAME != first && $col["status"] == "ok" { cpus[$1, ++cpu_count[$1]] = $col["cpu_seconds"] + 0 }
+  FILENAME != first && $col["status"] == "ok" {
+    cpus[$1, ++cpu_count[$1]] = $col["cpu_seconds"] + 0
+    # Summaries from before 2026-12-07 (20:06 UTC) have no system column.
+    if ("system_cpu_seconds" in col && $col["system_cpu_seconds"] != "") syss[$1, ++sys_count[$1]] = $col["system_cpu_seconds"] + 0
+  }
   END {
     for (i = 1; i <= n; ++i) {
       job = order[i]; split(row[job], p, "|")
@@ -68,6 +73,9 @@ awk -F',' -v paper="$paper" -v first="$1" '
       k = cpu_count[job]
       sort_runs(cpus, job, k)
       cpu = k == 0 ? "–" : sprintf("%.2f", median(cpus, job, k)) spread(cpus, job, k)
+      k = sys_count[job]
+      sort_runs(syss, job, k)
+      if (k > 0) cpu = cpu sprintf(", sys %.2f", median(syss, job, k)) spread(syss, job, k)
       printf "| | ours | %s | %s | %s, %.2f, %.2g | %s %s, %.2f, %.2g | %s, %.2f | %.2f%s | %.1f× | %s | %.2f, %.2f |\n",
         v[job, col["tets"]], v[job, col["time_steps"]],
         v[job, col["diffusion_iterations"]] (v[job, col["diffusion_iterations"]] >= 20000 ? " (cap)" : ""),

@@ -195,8 +195,12 @@ TEST_F(Batch, SummaryRowTakesDiffusionAndSolveFromEitherSide) {
            {"solve_seconds", 7.0}}}}}},
       {"transport", {{"wavefronts", 88}}},
       {"seconds", {{"transport", 0.25}, {"compare", 7.5}, {"total", 12.0}}},
-      {"peak_memory_bytes", 1 << 30}};
+      {"peak_memory_bytes", 1 << 30},
+      {"cpu_seconds", 20.5},
+      {"system_cpu_seconds", 0.75}};
   SummaryRow row = summary_row("t", report.dump());
+  EXPECT_DOUBLE_EQ(*row.cpu_seconds, 20.5);
+  EXPECT_DOUBLE_EQ(*row.system_cpu_seconds, 0.75);
   EXPECT_EQ(row.status, "ok");
   EXPECT_EQ(*row.tets, 1234);
   EXPECT_EQ(*row.time_steps, 10);
@@ -275,6 +279,15 @@ TEST_F(Batch, SummaryRowTakesDiffusionAndSolveFromEitherSide) {
   EXPECT_EQ(table[2][std::size_t(warnings - table[0].begin())], row.warnings);
   EXPECT_EQ(table[0].back(), "error");
   EXPECT_EQ(table[3].back(), failed.error);
+  // The peak memory in GiB under its own heading, the kernel's CPU seconds under theirs.
+  const auto column = [&](const char* heading) {
+    const auto it = std::find(table[0].begin(), table[0].end(), heading);
+    EXPECT_NE(it, table[0].end()) << heading;
+    return std::size_t(it - table[0].begin());
+  };
+  EXPECT_EQ(table[2][column("peak memory")], "1 GiB");
+  EXPECT_EQ(table[2][column("sys s")], "0.75");
+  EXPECT_EQ(cell(csv, 1, "system_cpu_seconds"), "0.75");
 }
 
 TEST_F(Batch, PlannedStagesAreTheStagesMapReports) {

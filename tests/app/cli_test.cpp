@@ -399,6 +399,9 @@ TEST_F(Cli, DemoWritesEveryOutput) {
   EXPECT_TRUE(report["trace"].contains("stalled"));
   EXPECT_TRUE(report["trace"].contains("descended"));
   EXPECT_GT(report["peak_memory_bytes"].get<std::int64_t>(), 0);
+  // The kernel's CPU time is a part of the whole.
+  EXPECT_GE(report["system_cpu_seconds"].get<double>(), 0.0);
+  EXPECT_LE(report["system_cpu_seconds"].get<double>(), report["cpu_seconds"].get<double>());
   // --max-memory refuses by the estimate, so it must not fall short of what the run then takes.
   EXPECT_GE(report["memory_estimate_bytes"].get<std::int64_t>(), report["peak_memory_bytes"].get<std::int64_t>());
   // labels.txt has one line per vertex of target.obj.
