@@ -119,6 +119,11 @@ for job in jobs:
     n = [x["cpu_seconds"] for x in reports["new"] if "cpu_seconds" in x]
     if o and n:
         print(f"| CPU s (process) | {fmt(o)} | {fmt(n)} | {statistics.median(n) / statistics.median(o):.3f} |")
+    # Its system part (binaries from before 2026-12-07 20:06 UTC do not report it): first touches of memory, mostly.
+    o = [x["system_cpu_seconds"] for x in reports["old"] if "system_cpu_seconds" in x]
+    n = [x["system_cpu_seconds"] for x in reports["new"] if "system_cpu_seconds" in x]
+    if o and n and statistics.median(o) > 0:
+        print(f"| system CPU s | {fmt(o)} | {fmt(n)} | {statistics.median(n) / statistics.median(o):.3f} |")
     for name, get in (("solver iterations", lambda x: x.get("solver", {}).get("iterations")),
                       ("trace rate evaluations", lambda x: x.get("trace", {}).get("rate_evaluations")),
                       ("peak memory MB", lambda x: (x.get("peak_memory_bytes") or 0) / 2**20)):
