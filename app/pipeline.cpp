@@ -1281,12 +1281,12 @@ PipelineResult run_pipeline(const PipelineOptions& options) {
     // CPU time next to wall time: on a shared machine the wall time says little without it.
     struct rusage usage {};
     ::getrusage(RUSAGE_SELF, &usage);
-    report["cpu_seconds"] = double(usage.ru_utime.tv_sec + usage.ru_stime.tv_sec) +
-                            1e-6 * double(usage.ru_utime.tv_usec + usage.ru_stime.tv_usec);
+    const auto seconds_of = [](const timeval& t) { return double(t.tv_sec) + 1e-6 * double(t.tv_usec); };
+    report["cpu_seconds"] = seconds_of(usage.ru_utime) + seconds_of(usage.ru_stime);
     // The kernel's part apart: on our virtual machines it is nearly all first touches of memory, which cost 20 times
     // more when the host has taken the pages back (docs/performance_log.md, 2026-12-07 from 20:06 UTC), and it is
     // most of what varies from run to run of the same map.
-    report["system_cpu_seconds"] = double(usage.ru_stime.tv_sec) + 1e-6 * double(usage.ru_stime.tv_usec);
+    report["system_cpu_seconds"] = seconds_of(usage.ru_stime);
   }
   report["memory_estimate_bytes"] = memory_estimate;
   // The allocator settings change the run time by a third on our machines (app/allocator.h), so every report says

@@ -114,16 +114,13 @@ for job in jobs:
         ratio = statistics.median(n) / statistics.median(o) if statistics.median(o) > 0 else float("nan")
         print(f"| {stage} | {fmt(o)} | {fmt(n)} | {ratio:.3f} |")
     # The process's CPU seconds (user and system): the same work gives the same figure unless the machine slows it,
-    # so a stage that is slower with a higher CPU figure on both sides says more about the machine than the code.
-    o = [x["cpu_seconds"] for x in reports["old"] if "cpu_seconds" in x]
-    n = [x["cpu_seconds"] for x in reports["new"] if "cpu_seconds" in x]
-    if o and n:
-        print(f"| CPU s (process) | {fmt(o)} | {fmt(n)} | {statistics.median(n) / statistics.median(o):.3f} |")
-    # Its system part (binaries from before 2026-12-07 20:06 UTC do not report it): first touches of memory, mostly.
-    o = [x["system_cpu_seconds"] for x in reports["old"] if "system_cpu_seconds" in x]
-    n = [x["system_cpu_seconds"] for x in reports["new"] if "system_cpu_seconds" in x]
-    if o and n and statistics.median(o) > 0:
-        print(f"| system CPU s | {fmt(o)} | {fmt(n)} | {statistics.median(n) / statistics.median(o):.3f} |")
+    # so a stage that is slower with a higher CPU figure on both sides says more about the machine than the code. Then
+    # their system part (binaries from before 2026-12-07 20:06 UTC do not report it): first touches of memory, mostly.
+    for name, key in (("CPU s (process)", "cpu_seconds"), ("system CPU s", "system_cpu_seconds")):
+        o = [x[key] for x in reports["old"] if key in x]
+        n = [x[key] for x in reports["new"] if key in x]
+        if o and n and statistics.median(o) > 0:
+            print(f"| {name} | {fmt(o)} | {fmt(n)} | {statistics.median(n) / statistics.median(o):.3f} |")
     for name, get in (("solver iterations", lambda x: x.get("solver", {}).get("iterations")),
                       ("trace rate evaluations", lambda x: x.get("trace", {}).get("rate_evaluations")),
                       ("peak memory MB", lambda x: (x.get("peak_memory_bytes") or 0) / 2**20)):

@@ -33,8 +33,8 @@ echo "it), the Gauss-Seidel comparison not included: the median of $runs runs (t
 echo "that median. Maps' CPU s: the CPU seconds (user and system, the whole process) of the maps timed without the"
 echo "comparison ($timed), and the system (kernel) part of them: the same work in every run, so a larger figure"
 echo "means a slower machine, not more work (the system part is nearly all first touches of memory, which cost about 20"
-echo "times more when the host has taken the pages back). The other columns are the first run's; the last is its whole job with the comparison"
-echo "diffusion, wall and CPU seconds (on a shared machine wall >> CPU / cores)."
+echo "times more when the host has taken the pages back). The other columns are the first run's; the last is its whole"
+echo "job with the comparison diffusion, wall and CPU seconds (on a shared machine wall >> CPU / cores)."
 echo
 echo "| morph | who | tets | steps | diffusion (iters, s, conv) | implicit/direct (iters, s, residual) | label prop (passes, s) | total s [range] | ratio | maps' CPU s | with GS: wall s, CPU s |"
 echo "|---|---|--:|--:|---|---|---|--:|--:|--:|---|"
@@ -46,6 +46,8 @@ awk -F',' -v paper="$paper" -v first="$1" '
   }
   function median(a, job, m) { return m % 2 ? a[job, (m + 1) / 2] : (a[job, m / 2] + a[job, m / 2 + 1]) / 2 }
   function spread(a, job, m) { return m > 1 ? sprintf(" [%.2f–%.2f]", a[job, 1], a[job, m]) : "" }
+  # "median [min–max]" of runs a[job, 1..m], m > 0 (sorts them).
+  function figure(a, job, m) { sort_runs(a, job, m); return sprintf("%.2f", median(a, job, m)) spread(a, job, m) }
   BEGIN {
     n = split(paper, lines, "\n")
     for (i = 1; i <= n; ++i) { split(lines[i], f, "|"); order[i] = f[1]; row[f[1]] = lines[i] }
@@ -70,12 +72,8 @@ awk -F',' -v paper="$paper" -v first="$1" '
       sort_runs(times, job, m)
       t = median(times, job, m)
       range = spread(times, job, m)
-      k = cpu_count[job]
-      sort_runs(cpus, job, k)
-      cpu = k == 0 ? "–" : sprintf("%.2f", median(cpus, job, k)) spread(cpus, job, k)
-      k = sys_count[job]
-      sort_runs(syss, job, k)
-      if (k > 0) cpu = cpu sprintf(", sys %.2f", median(syss, job, k)) spread(syss, job, k)
+      cpu = cpu_count[job] == 0 ? "–" : figure(cpus, job, cpu_count[job])
+      if (sys_count[job] > 0) cpu = cpu ", sys " figure(syss, job, sys_count[job])
       printf "| | ours | %s | %s | %s, %.2f, %.2g | %s %s, %.2f, %.2g | %s, %.2f | %.2f%s | %.1f× | %s | %.2f, %.2f |\n",
         v[job, col["tets"]], v[job, col["time_steps"]],
         v[job, col["diffusion_iterations"]] (v[job, col["diffusion_iterations"]] >= 20000 ? " (cap)" : ""),
