@@ -215,6 +215,12 @@ void add_pipeline_options(CLI::App& cmd, PipelineOptions& o) {
          "where the trace stopped (auto: with --fold-repair on; on; off)")
       ->check(CLI::IsMember({"auto", "on", "off"}))
       ->default_str("auto");
+  cmd.add_option("--distances", o.morph.distances,
+                 "A mesh's distances near its surface: exact (closest-point queries within the band, signs from the "
+                 "winding number along the lattice lines) or openvdb (OpenVDB's meshToVolume: values a few percent "
+                 "of a voxel off, signs flood-filled; slower on meshes of many small triangles)")
+      ->check(CLI::IsMember({"exact", "openvdb"}))
+      ->capture_default_str();
   add_switch(
       cmd, "--thin-features", o.morph.thin.enabled,
       "Keep sheets, rods and gaps thinner than a voxel on the lattice: a lattice edge crossing a mesh twice moves "

@@ -969,6 +969,7 @@ PipelineResult run_pipeline(const PipelineOptions& options) {
                        {"morph", options.morph_method},
                        {"source_projection", options.source_projection},
                        {"thin_features", options.morph.thin.enabled},
+                       {"distances", options.morph.distances},
                        {"trace_order", options.trace.order},
                        {"trace_step", options.trace.step_variation},
                        {"trace_smoothing", options.trace.field_smoothing},
@@ -993,9 +994,11 @@ PipelineResult run_pipeline(const PipelineOptions& options) {
                       {"source_triangles", A.F.rows()},
                       {"lattice_points", morph.lattice_points},
                       {"exact_distance_queries", morph.exact_queries},
+                      {"band_distance_queries", morph.band_queries},
                       {"lattice_dims", {morph.field.dims.x(), morph.field.dims.y(), morph.field.dims.z()}}};
   report["morph"] = {{"method", morph.method}, {"seconds", morph.seconds}};
   if (morph.method == "distance") {
+    report["morph"]["distances"] = options.morph.distances;
     const auto thin = [](const ThinFeatureResult& r) {
       return nlohmann::json{{"sign_disagreements", r.sign_disagreements},
                             {"sign_flips", r.sign_flips},

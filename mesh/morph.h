@@ -1,6 +1,6 @@
 // Distance-field morph d(x, t) = (1 - t) dA(x) + t dB(x) (Payne and Toga 1992; paper §5.1),
-// sampled on a regular lattice. OpenVDB builds the signed distance grids; their values are then
-// kept as dense lattice arrays so that no other translation unit includes OpenVDB.
+// sampled on a regular lattice, as dense arrays: closest-point queries (or, on request, OpenVDB's signed distance
+// grids, which no other translation unit includes) give a mesh's distances near its surface.
 #pragma once
 
 #include <Eigen/Core>
@@ -37,17 +37,22 @@ struct MorphOptions {
   int voxels = 40;          ///< lattice voxels across the larger side of the union bounding box (demo: 2.4M tets, 10 s)
   double voxel_size = 0.0;  ///< explicit voxel size h; overrides `voxels` when > 0
   int padding = 2;          ///< voxels of margin around the union bounding box (d > 0 there)
-  double band = 3.0;        ///< OpenVDB narrow-band half width in voxels; its values are kept inside it (within a few
-                            ///< percent of a voxel of exact) and exact distances are filled in beyond it
+  double band = 3.0;        ///< narrow-band half width in voxels: distances inside it come from the `distances` method,
+                            ///< exact ones are filled in beyond it where the morph can change sign
+  /// How a mesh's distances inside the band and its signs are found: "exact" (closest-point queries at the lattice
+  /// points within the band, signs from the winding number along the lattice lines) or "openvdb" (OpenVDB's
+  /// meshToVolume, its values up to 4-14% of a voxel off and its signs flood-filled; 3-4 times slower on meshes of
+  /// many small triangles, measured on the horse and the Buddha).
+  std::string distances = "exact";
   ThinFeatureOptions thin;  ///< sheets, rods and gaps thinner than a voxel kept on the lattice (meshes only)
 };
 
 /// Signed distances of A and B (negative inside) on the lattice points origin + h * (i, j, k).
 /// Signs are right everywhere; at every corner of a cube where d can change sign for some t (near the
-/// surfaces and over the symmetric difference of the solids) distances are OpenVDB's inside its band (up to
-/// 4-14% of a voxel off, see fill_exact_distances in morph.cpp) and exact beyond it; clamped to +-band voxels
-/// elsewhere, where they cannot influence the zero set. A surface with an analytic
-/// signed_distance (built-in shapes) is sampled from it, exactly, at every lattice point.
+/// surfaces and over the symmetric difference of the solids) distances are exact inside the band (with
+/// MorphOptions::distances "openvdb": OpenVDB's, up to 4-14% of a voxel off, see fill_exact_distances in morph.cpp)
+/// and exact beyond it; clamped to +-band voxels elsewhere, where they cannot influence the zero set. A surface with
+/// an analytic signed_distance (built-in shapes) is sampled from it, exactly, at every lattice point.
 struct MorphField {
   Eigen::Vector3d origin = Eigen::Vector3d::Zero();  ///< world position of lattice point (0, 0, 0)
   double voxel_size = 0.0;                           ///< h
@@ -81,6 +86,7 @@ struct MorphResult {
   MorphField field;
   double seconds = 0.0;  ///< wall time of the stage
   std::int64_t lattice_points = 0;
+  std::int64_t band_queries = 0;     ///< closest-point queries made for the band ("exact" distances)
   std::int64_t exact_queries = 0;    ///< closest-point queries made beyond the narrow band
   std::string method = "distance";   ///< "distance" (build_morph) or "vim" (build_vim_morph)
   ThinFeatureResult thin_a, thin_b;  ///< thin parts of A and B put back on the lattice (distance morph of meshes)

@@ -39,59 +39,6 @@ float other_sign(float v, double h) {
   return v < 0.0f ? std::max(-v, tiny) : std::min(-v, -tiny);
 }
 
-// Inside/outside votes of every lattice point from the winding number of the surface along its three lattice lines
-// (one ray per line, each line writing only its own points): the signed count of crossings before the point, which
-// is nonzero inside, also where parts of a surface overlap (parity would call that outside). A line whose crossings
-// do not sum to zero has missed or doubled one (it grazes an edge) and does not vote. Returns the number of those.
-std::int64_t vote_by_winding(const SurfaceLocator& locator, const MorphField& field, std::vector<std::uint8_t>& inside,
-                             std::vector<std::uint8_t>& votes) {
-  const Eigen::Vector3i& n = field.dims;
-  const double h = field.voxel_size;
-  std::int64_t grazing = 0;
-  for (int axis = 0; axis < 3; ++axis) {
-    const int u = (axis + 1) % 3, w = (axis + 2) % 3;
-    const int length = n(axis);
-    std::vector<std::uint8_t> bad(std::size_t(n(u)) * std::size_t(n(w)), 0);
-    tbb::parallel_for(tbb::blocked_range<int>(0, n(w)), [&](const tbb::blocked_range<int>& range) {
-      std::vector<double> at;
-      std::vector<int> direction;
-      for (int b = range.begin(); b != range.end(); ++b)
-        for (int a = 0; a < n(u); ++a) {
-          Eigen::Vector3i first = Eigen::Vector3i::Zero();
-          first(u) = a;
-          first(w) = b;
-          Eigen::Vector3i last = first;
-          last(axis) = length - 1;
-          // From a voxel before the first point to a voxel past the last, both outside every surface (padding).
-          const Eigen::Vector3d step = h * Eigen::Vector3d::Unit(axis);
-          const Eigen::Vector3d from = field.point(first.x(), first.y(), first.z()) - step;
-          const Eigen::Vector3d to = field.point(last.x(), last.y(), last.z()) + step;
-          const double span = double(length + 1);  // the segment's length in voxels
-          at = locator.crossings(from, to, 1 << 20, 1e-3 / span, &direction);
-          int total = 0;
-          for (const int d : direction) total += d;
-          if (total != 0) {
-            bad[std::size_t(a) + std::size_t(n(u)) * std::size_t(b)] = 1;
-            continue;
-          }
-          std::size_t passed = 0;
-          int winding = 0;
-          for (int m = 0; m < length; ++m) {
-            const double t = double(m + 1) / span;
-            while (passed < at.size() && at[passed] < t) winding += direction[passed++];
-            Eigen::Vector3i p = first;
-            p(axis) = m;
-            const std::size_t q = std::size_t(field.index(p.x(), p.y(), p.z()));
-            inside[q] = std::uint8_t(inside[q] + (winding != 0));
-            ++votes[q];
-          }
-        }
-    });
-    for (const std::uint8_t o : bad) grazing += o;
-  }
-  return grazing;
-}
-
 // The Kuhn simplices with lowest vertex q: chains of nonempty subsets S1 < S2 < ... of {x, y, z} (bit masks), each
 // vertex q + S; every simplex of the triangulation has one such form, inside the cube at q. 7 edges, 12 triangles and
 // 6 tets, so a point whose cube has one sign throughout adds 1 - 7 + 12 - 6 = 0 to chi: only cubes the zero set
@@ -368,8 +315,63 @@ GroupOutcome flip_groups(const MorphField& field, std::vector<float>& values, co
 
 }  // namespace
 
+WindingVotes winding_votes(const SurfaceLocator& locator, const MorphField& field) {
+  WindingVotes result;
+  std::vector<std::uint8_t>& inside = result.inside;
+  std::vector<std::uint8_t>& votes = result.votes;
+  inside.assign(std::size_t(field.point_count()), 0);
+  votes.assign(std::size_t(field.point_count()), 0);
+  const Eigen::Vector3i& n = field.dims;
+  const double h = field.voxel_size;
+  std::int64_t grazing = 0;
+  for (int axis = 0; axis < 3; ++axis) {
+    const int u = (axis + 1) % 3, w = (axis + 2) % 3;
+    const int length = n(axis);
+    std::vector<std::uint8_t> bad(std::size_t(n(u)) * std::size_t(n(w)), 0);
+    tbb::parallel_for(tbb::blocked_range<int>(0, n(w)), [&](const tbb::blocked_range<int>& range) {
+      std::vector<double> at;
+      std::vector<int> direction;
+      for (int b = range.begin(); b != range.end(); ++b)
+        for (int a = 0; a < n(u); ++a) {
+          Eigen::Vector3i first = Eigen::Vector3i::Zero();
+          first(u) = a;
+          first(w) = b;
+          Eigen::Vector3i last = first;
+          last(axis) = length - 1;
+          // From a voxel before the first point to a voxel past the last, both outside every surface (padding).
+          const Eigen::Vector3d step = h * Eigen::Vector3d::Unit(axis);
+          const Eigen::Vector3d from = field.point(first.x(), first.y(), first.z()) - step;
+          const Eigen::Vector3d to = field.point(last.x(), last.y(), last.z()) + step;
+          const double span = double(length + 1);  // the segment's length in voxels
+          at = locator.crossings(from, to, 1 << 20, 1e-3 / span, &direction);
+          int total = 0;
+          for (const int d : direction) total += d;
+          if (total != 0) {
+            bad[std::size_t(a) + std::size_t(n(u)) * std::size_t(b)] = 1;
+            continue;
+          }
+          std::size_t passed = 0;
+          int winding = 0;
+          for (int m = 0; m < length; ++m) {
+            const double t = double(m + 1) / span;
+            while (passed < at.size() && at[passed] < t) winding += direction[passed++];
+            Eigen::Vector3i p = first;
+            p(axis) = m;
+            const std::size_t q = std::size_t(field.index(p.x(), p.y(), p.z()));
+            inside[q] = std::uint8_t(inside[q] + (winding != 0));
+            ++votes[q];
+          }
+        }
+    });
+    for (const std::uint8_t o : bad) grazing += o;
+  }
+  result.grazing_lines = grazing;
+  return result;
+}
+
 ThinFeatureResult keep_thin_features(const SurfaceLocator& locator, const MorphField& field, std::vector<float>& values,
-                                     const LatticeTopology& target, const ThinFeatureOptions& options) {
+                                     const LatticeTopology& target, const ThinFeatureOptions& options,
+                                     const WindingVotes* winding) {
   ThinFeatureResult result;
   const Eigen::Vector3i& n = field.dims;
   if (values.size() != std::size_t(field.point_count()))
@@ -378,11 +380,16 @@ ThinFeatureResult keep_thin_features(const SurfaceLocator& locator, const MorphF
   if (!options.enabled || n.minCoeff() < 2) return result;
   const double h = field.voxel_size;
 
-  std::vector<std::uint8_t> inside(values.size(), 0), votes(values.size(), 0);
-  result.grazing_lines = vote_by_winding(locator, field, inside, votes);
+  WindingVotes own;
+  if (winding == nullptr) {
+    own = winding_votes(locator, field);
+    winding = &own;
+  }
+  const std::vector<std::uint8_t>&inside = winding->inside, &votes = winding->votes;
+  result.grazing_lines = winding->grazing_lines;
   std::vector<std::int64_t> wrong;
   for (std::size_t q = 0; q < values.size(); ++q) {
-    if (2 * inside[q] == votes[q]) continue;  // a tie (or no vote): OpenVDB's sign stands
+    if (2 * inside[q] == votes[q]) continue;  // a tie (or no vote): the sampled sign stands
     const bool in = 2 * inside[q] > votes[q];
     if (in != (values[q] < 0.0f)) wrong.push_back(std::int64_t(q));
   }

@@ -10,6 +10,7 @@
 // (Euler characteristic 2; -10 without, -6 with (1) alone, -4 with (2) alone).
 #pragma once
 
+#include <cstdint>
 #include <vector>
 
 #include "mesh/morph.h"
@@ -26,6 +27,20 @@ struct LatticeTopology {
 /// The zero set's topology. The lattice's boundary points must be outside (the morph's padding).
 LatticeTopology lattice_topology(const MorphField& field, const std::vector<float>& values);
 
+/// Inside/outside votes of every lattice point from the winding number of the surface along its three lattice lines
+/// (one ray per line, each line writing only its own points): the signed count of crossings before the point, which
+/// is nonzero inside, also where parts of a surface overlap (parity would call that outside). A line whose crossings
+/// do not sum to zero has missed or doubled one (it grazes an edge) and does not vote.
+struct WindingVotes {
+  std::vector<std::uint8_t> inside;  ///< point_count() entries: lines through the point that put it inside (0-3)
+  std::vector<std::uint8_t> votes;   ///< point_count() entries: lines through the point that vote (0-3)
+  std::int64_t grazing_lines = 0;    ///< lattice lines that do not vote
+};
+
+/// The votes of the lattice lines of `field` on the surface `locator` is built on. The lattice's boundary points must
+/// be outside the surface (the morph's padding).
+WindingVotes winding_votes(const SurfaceLocator& locator, const MorphField& field);
+
 /// Corrects the signs of `values` (field.dims.prod() entries in MorphField's layout: dA or dB of `field`) by the
 /// winding number along the lattice lines through each point (the majority of the three axes; a line whose crossings'
 /// directions do not sum to zero, which grazes the surface, does not vote), then moves lattice points across thin
@@ -39,6 +54,7 @@ LatticeTopology lattice_topology(const MorphField& field, const std::vector<floa
 /// surface's own: |Euler difference| + |components difference| falls), so a rod thinner than a voxel, whose moved ends
 /// would ring it with a handle, is left as it was.
 ThinFeatureResult keep_thin_features(const SurfaceLocator& locator, const MorphField& field, std::vector<float>& values,
-                                     const LatticeTopology& target, const ThinFeatureOptions& options = {});
+                                     const LatticeTopology& target, const ThinFeatureOptions& options = {},
+                                     const WindingVotes* winding = nullptr);
 
 }  // namespace morphmap

@@ -292,12 +292,13 @@ SurfaceLocator::~SurfaceLocator() = default;
 
 SurfaceHit SurfaceLocator::closest(const Eigen::Vector3d& query) const { return closest_near(query, -1); }
 
-SurfaceHit SurfaceLocator::closest_near(const Eigen::Vector3d& query, int hint) const {
+SurfaceHit SurfaceLocator::closest_near(const Eigen::Vector3d& query, int hint, double within) const {
   if (!query.allFinite()) throw InvalidInput("SurfaceLocator::closest: non-finite query point");
   const Impl& m = *impl_;
   Search search;
   search.faces = &m.faces;
   search.query = query;
+  if (within < std::numeric_limits<double>::infinity()) search.best_d2 = within * within;
   // A face near the answer, visited first, bounds the search radius from the start: Embree then prunes every node
   // farther than it instead of descending from an infinite radius. The answer is the lexicographic minimum of
   // (distance, face) over the faces within the radius, which the bound's margin keeps, so it is the same.
@@ -313,7 +314,8 @@ SurfaceHit SurfaceLocator::closest_near(const Eigen::Vector3d& query, int hint) 
     point.y = float(local.y());
     point.z = float(local.z());
     point.time = 0.0f;
-    point.radius = search.best_face >= 0 ? search.radius() : std::numeric_limits<float>::infinity();
+    point.radius = search.best_d2 < std::numeric_limits<double>::infinity() ? search.radius()
+                                                                            : std::numeric_limits<float>::infinity();
     RTCPointQueryContext context;
     rtcInitPointQueryContext(&context);
     rtcPointQuery(m.scene, &point, &context, visit_face, &search);
@@ -321,8 +323,14 @@ SurfaceHit SurfaceLocator::closest_near(const Eigen::Vector3d& query, int hint) 
   } else {
     for (std::size_t f = 0; f < m.faces.size(); ++f) search.visit(unsigned(f));
   }
-  if (search.best_face < 0) throw Error("SurfaceLocator::closest: the point query found no face");
   SurfaceHit hit;
+  if (search.best_face < 0) {
+    if (within < std::numeric_limits<double>::infinity()) {
+      hit.distance = std::numeric_limits<double>::infinity();
+      return hit;
+    }
+    throw Error("SurfaceLocator::closest: the point query found no face");
+  }
   hit.point = search.best_point;
   hit.face = search.best_face;
   hit.distance = (hit.point - query).norm();
@@ -335,7 +343,7 @@ SurfaceHit SurfaceLocator::closest_near(const Eigen::Vector3d& query, int hint) 
   return hit;
 }
 
-std::vector<SurfaceHit> SurfaceLocator::closest_all(const Eigen::MatrixXd& Q) const {
+std::vector<SurfaceHit> SurfaceLocator::closest_all(const Eigen::MatrixXd& Q, double within) const {
   if (Q.rows() > 0 && Q.cols() != 3) throw InvalidInput("SurfaceLocator::closest_all: queries must be #Q by 3");
   std::vector<SurfaceHit> hits(std::size_t(Q.rows()));
   // Callers pass queries in a coherent order (lattice points, mesh vertices), so each query starts from the face
@@ -343,8 +351,8 @@ std::vector<SurfaceHit> SurfaceLocator::closest_all(const Eigen::MatrixXd& Q) co
   tbb::parallel_for(tbb::blocked_range<Eigen::Index>(0, Q.rows(), 256), [&](const tbb::blocked_range<Eigen::Index>& r) {
     int hint = -1;
     for (Eigen::Index i = r.begin(); i != r.end(); ++i) {
-      hits[std::size_t(i)] = closest_near(Q.row(i).transpose(), hint);
-      hint = hits[std::size_t(i)].face;
+      hits[std::size_t(i)] = closest_near(Q.row(i).transpose(), hint, within);
+      if (hits[std::size_t(i)].face >= 0) hint = hits[std::size_t(i)].face;
     }
   });
   return hits;

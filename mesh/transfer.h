@@ -3,6 +3,7 @@
 #pragma once
 
 #include <Eigen/Core>
+#include <limits>
 #include <memory>
 #include <vector>
 
@@ -34,10 +35,15 @@ class SurfaceLocator {
 
   SurfaceHit closest(const Eigen::Vector3d& query) const;
   /// closest() with the search started from face `hint` (-1: none), which bounds its radius from the start: the
-  /// same hit, found faster when the hint is near it.
-  SurfaceHit closest_near(const Eigen::Vector3d& query, int hint) const;
-  /// One hit per row of Q (#Q by 3), TBB-parallel, order preserved; each query hinted by the previous one's face.
-  std::vector<SurfaceHit> closest_all(const Eigen::MatrixXd& Q) const;
+  /// same hit, found faster when the hint is near it. With a finite `within`, only faces closer than it count (the
+  /// search prunes everything beyond it from the start): the same hit as closest() when that is closer, else one
+  /// with face -1 and an infinite distance.
+  SurfaceHit closest_near(const Eigen::Vector3d& query, int hint,
+                          double within = std::numeric_limits<double>::infinity()) const;
+  /// One hit per row of Q (#Q by 3), TBB-parallel, order preserved; each query hinted by the previous one's face
+  /// and bounded by `within` as in closest_near.
+  std::vector<SurfaceHit> closest_all(const Eigen::MatrixXd& Q,
+                                      double within = std::numeric_limits<double>::infinity()) const;
   /// Where the segment from a to b crosses the surface: the parameters t in [0, 1] of a + t (b - a), ascending, at
   /// most `limit` of them. Hits closer together than `separation` (in t) count once: a segment through a shared
   /// edge or vertex meets two or more faces there. With `directions`, also whether the segment leaves (+1: along the

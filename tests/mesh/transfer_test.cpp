@@ -265,6 +265,30 @@ TEST(TransferTest, ClosestAllMatchesClosestInOrder) {
   EXPECT_TRUE(locator.closest_all(Eigen::MatrixXd(0, 3)).empty());
 }
 
+// A bound on the search: the unbounded hit when it lies within the bound, none (face -1, infinite distance) beyond.
+TEST(TransferTest, BoundedQueriesFindOnlyFacesWithinTheBound) {
+  const SurfaceLocator locator(to_surface(test_mesh::icosphere(2)));
+  const Eigen::MatrixXd Q = random_points(3000, 1.5, 5);
+  const double within = 0.2;
+  const std::vector<SurfaceHit> bounded = locator.closest_all(Q, within);
+  int found = 0, missed = 0;
+  for (Eigen::Index i = 0; i < Q.rows(); ++i) {
+    const SurfaceHit one = locator.closest(Q.row(i).transpose());
+    const SurfaceHit& hit = bounded[std::size_t(i)];
+    if (one.distance < within) {
+      ++found;
+      EXPECT_EQ(hit.face, one.face) << i;
+      EXPECT_EQ(hit.point, one.point) << i;
+    } else {
+      ++missed;
+      EXPECT_EQ(hit.face, -1) << i;
+      EXPECT_EQ(hit.distance, std::numeric_limits<double>::infinity()) << i;
+    }
+  }
+  EXPECT_GT(found, 100);
+  EXPECT_GT(missed, 100);
+}
+
 TEST(TransferTest, DegenerateTrianglesGiveConvexWeights) {
   Surface s;
   s.V.resize(5, 3);
