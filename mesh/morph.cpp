@@ -20,6 +20,7 @@
 #include <memory>
 #include <mutex>
 #include <sstream>
+#include <utility>
 
 #include "mesh/errors.h"
 #include "mesh/thin_features.h"
@@ -225,16 +226,18 @@ void sample_distance(const SignedDistance& distance, const MorphField& field, st
 // are exact everywhere already). OpenVDB's band values ("openvdb" distances) are left as they are: replacing them
 // too was measured in 2026-12 (cow -> horse's L2 p99 20.6 -> 33.7) when that was the only method; the "exact"
 // method, measured since over the Table II models at several resolutions, maps neither better nor worse.
+// `filled` holds the points already filled (empty: none), and is set to the points marked now.
 std::int64_t fill_exact_distances(const Surface& A, const Surface& B, const SurfaceLocator* locators[2], float clamp,
-                                  MorphField& field) {
-  const std::vector<std::uint8_t> mark = crossing_corners(field);
+                                  MorphField& field, std::vector<std::uint8_t>& filled) {
+  std::vector<std::uint8_t> mark = crossing_corners(field);
   std::int64_t queries = 0;
   for (int which = 0; which < 2; ++which) {
     if ((which == 0 ? A : B).signed_distance) continue;
     std::vector<float>& values = which == 0 ? field.dA : field.dB;
     std::vector<std::int64_t> todo;
     for (std::size_t q = 0; q < values.size(); ++q)
-      if (mark[q] && std::abs(values[q]) >= 0.999f * clamp) todo.push_back(std::int64_t(q));
+      if (mark[q] && (filled.empty() || !filled[q]) && std::abs(values[q]) >= 0.999f * clamp)
+        todo.push_back(std::int64_t(q));
     if (todo.empty()) continue;
     Eigen::MatrixXd points(Eigen::Index(todo.size()), 3);
     const std::int64_t nx = field.dims.x(), ny = field.dims.y();
@@ -249,6 +252,7 @@ std::int64_t fill_exact_distances(const Surface& A, const Surface& B, const Surf
     }
     queries += std::int64_t(todo.size());
   }
+  filled = std::move(mark);
   return queries;
 }
 
@@ -303,7 +307,7 @@ MorphResult build_morph(const Surface& A, const Surface& B, const MorphOptions& 
   MorphField& field = result.field;
   const double h = field.voxel_size;
 
-  const float band = float(options.band);
+  const float band = float(options.band_voxels());
   std::unique_ptr<SurfaceLocator> owned[2];
   const SurfaceLocator* locators[2] = {nullptr, nullptr};
   for (int which = 0; which < 2; ++which)
@@ -328,7 +332,8 @@ MorphResult build_morph(const Surface& A, const Surface& B, const MorphOptions& 
     }
   }
   result.lattice_points = field.point_count();
-  result.exact_queries = fill_exact_distances(A, B, locators, band * float(h), field);
+  std::vector<std::uint8_t> filled;
+  result.exact_queries = fill_exact_distances(A, B, locators, band * float(h), field, filled);
   // After the exact distances: thin parts lie within a voxel of the surface, inside the band either way.
   // A and B side by side: much of the work (the topology counts) is sequential, and the two are independent.
   const auto keep = [&](int which) {
@@ -341,6 +346,12 @@ MorphResult build_morph(const Surface& A, const Surface& B, const MorphOptions& 
                            winding[which].votes.empty() ? nullptr : &winding[which]);
   };
   tbb::parallel_invoke([&] { keep(0); }, [&] { keep(1); });
+  // A point the thin parts moved to the other side makes cubes crossed that were not, and their corners up to
+  // 2 sqrt(3) voxels from the surface may still hold the band's width: exact distances there too (so that the values
+  // the extraction reads do not depend on the band's width beyond sqrt(3) voxels).
+  const auto moved = [](const ThinFeatureResult& r) { return r.sign_flips + r.moved_inside + r.moved_outside; };
+  if (moved(result.thin_a) + moved(result.thin_b) > 0)
+    result.exact_queries += fill_exact_distances(A, B, locators, band * float(h), field, filled);
   result.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
   return result;
 }

@@ -37,13 +37,19 @@ struct MorphOptions {
   int voxels = 40;          ///< lattice voxels across the larger side of the union bounding box (demo: 2.4M tets, 10 s)
   double voxel_size = 0.0;  ///< explicit voxel size h; overrides `voxels` when > 0
   int padding = 2;          ///< voxels of margin around the union bounding box (d > 0 there)
-  double band = 3.0;        ///< narrow-band half width in voxels: distances inside it come from the `distances` method,
-                            ///< exact ones are filled in beyond it where the morph can change sign
+  /// Narrow-band half width in voxels (0: the method's own, band_voxels()): distances inside it come from the
+  /// `distances` method, exact ones are filled in beyond it where the morph can change sign. The extraction and the
+  /// thin-feature pass read values only within sqrt(3) voxels of a surface, so with exact distances any band over that
+  /// gives the same values there; OpenVDB's band values are a few percent off, and its 3 voxels were kept as measured.
+  double band = 0.0;
   /// How a mesh's distances inside the band and its signs are found: "exact" (closest-point queries at the lattice
   /// points within the band, signs from the winding number along the lattice lines) or "openvdb" (OpenVDB's
   /// meshToVolume, its values up to 4-14% of a voxel off and its signs flood-filled; 3-4 times slower on meshes of
   /// many small triangles, measured on the horse and the Buddha).
   std::string distances = "exact";
+
+  /// The band's half width in voxels: `band`, or 2 for "exact" distances and 3 for "openvdb" when it is 0.
+  double band_voxels() const { return band > 0.0 ? band : distances == "openvdb" ? 3.0 : 2.0; }
   ThinFeatureOptions thin;  ///< sheets, rods and gaps thinner than a voxel kept on the lattice (meshes only)
 };
 
