@@ -67,8 +67,8 @@ void sample_lattice(const openvdb::FloatGrid& grid, const MorphField& field, std
 // Signed distances of a mesh at every lattice point: exact within `band` voxels of the surface (Embree's closest-point
 // queries), +-band voxels beyond, negative where the winding votes of the lattice lines say inside (a tie: the side
 // of the closest face). Written by hand around the locator because OpenVDB's meshToVolume works per triangle, each
-// flooding the voxels around it: the horse's 97 k triangles took 0.20-0.30 s where its 26 k band points take 0.04 s
-// of queries.
+// flooding the voxels around it: the horse's 97 k triangles took 0.20-0.30 s where the 26 k points of its 3-voxel
+// band took 0.04 s of queries.
 std::int64_t mesh_distances(const Surface& surface, const SurfaceLocator& locator, const WindingVotes& winding,
                             const MorphField& field, float band, std::vector<float>& out) {
   const Eigen::Vector3i& n = field.dims;
@@ -225,7 +225,8 @@ void sample_distance(const SignedDistance& distance, const MorphField& field, st
 // Replaces band-clamped values at marked lattice points with exact signed distances (surfaces sampled analytically
 // are exact everywhere already). OpenVDB's band values ("openvdb" distances) are left as they are: replacing them
 // too was measured in 2026-12 (cow -> horse's L2 p99 20.6 -> 33.7) when that was the only method; the "exact"
-// method, measured since over the Table II models at several resolutions, maps neither better nor worse.
+// method (whose signs differ too) maps some models better and more of them worse (docs/performance_log.md,
+// 2026-12-07 from 21:12 UTC), at half the morph stage's time.
 // `filled` holds the points already filled (empty: none), and is set to the points marked now.
 std::int64_t fill_exact_distances(const Surface& A, const Surface& B, const SurfaceLocator* locators[2], float clamp,
                                   MorphField& field, std::vector<std::uint8_t>& filled) {
