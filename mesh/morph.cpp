@@ -45,6 +45,8 @@ openvdb::FloatGrid::Ptr signed_distance_grid(const Surface& surface, const Morph
   for (Eigen::Index f = 0; f < surface.F.rows(); ++f)
     triangles[f] = openvdb::Vec3I(surface.F(f, 0), surface.F(f, 1), surface.F(f, 2));
   const std::vector<openvdb::Vec4I> quads;
+  static std::once_flag vdb_init;
+  std::call_once(vdb_init, [] { openvdb::initialize(); });
   const auto xform = openvdb::math::Transform::createLinearTransform(1.0);
   return openvdb::tools::meshToSignedDistanceField<openvdb::FloatGrid>(*xform, points, triangles, quads, band_voxels,
                                                                        band_voxels);
@@ -62,6 +64,17 @@ void sample_lattice(const openvdb::FloatGrid& grid, const MorphField& field, std
         for (int i = 0; i < field.dims.x(); ++i)
           out[std::size_t(field.index(i, j, k))] = h * accessor.getValue(openvdb::Coord(i, j, k));
   });
+}
+
+// The positions of lattice points given by index (MorphField::index), #list by 3: the queries of a list of points.
+Eigen::MatrixXd lattice_points(const MorphField& field, const std::vector<std::int64_t>& list) {
+  const std::int64_t nx = field.dims.x(), ny = field.dims.y();
+  Eigen::MatrixXd points(Eigen::Index(list.size()), 3);
+  for (std::size_t r = 0; r < list.size(); ++r) {
+    const std::int64_t q = list[r];
+    points.row(Eigen::Index(r)) = field.point(int(q % nx), int((q / nx) % ny), int(q / (nx * ny))).transpose();
+  }
+  return points;
 }
 
 // Signed distances of a mesh at every lattice point: exact within `band` voxels of the surface (Embree's closest-point
@@ -138,16 +151,8 @@ std::int64_t mesh_distances(const Surface& surface, const SurfaceLocator& locato
     else if (near[q])
       bounded.push_back(std::int64_t(q));
   }
-  const auto at = [&](const std::vector<std::int64_t>& list) {
-    Eigen::MatrixXd points(Eigen::Index(list.size()), 3);
-    for (std::size_t r = 0; r < list.size(); ++r) {
-      const std::int64_t q = list[r];
-      points.row(Eigen::Index(r)) = field.point(int(q % sy), int((q / sy) % n.y()), int(q / sz)).transpose();
-    }
-    return points;
-  };
-  const std::vector<SurfaceHit> near_hits = locator.closest_all(at(bounded), double(clamp));
-  const Eigen::MatrixXd tied_points = at(tied);
+  const std::vector<SurfaceHit> near_hits = locator.closest_all(lattice_points(field, bounded), double(clamp));
+  const Eigen::MatrixXd tied_points = lattice_points(field, tied);
   const std::vector<SurfaceHit> tied_hits = locator.closest_all(tied_points);
   out.assign(near.size(), clamp);
   tbb::parallel_for(tbb::blocked_range<std::size_t>(0, near.size()), [&](const tbb::blocked_range<std::size_t>& r) {
@@ -240,13 +245,7 @@ std::int64_t fill_exact_distances(const Surface& A, const Surface& B, const Surf
       if (mark[q] && (filled.empty() || !filled[q]) && std::abs(values[q]) >= 0.999f * clamp)
         todo.push_back(std::int64_t(q));
     if (todo.empty()) continue;
-    Eigen::MatrixXd points(Eigen::Index(todo.size()), 3);
-    const std::int64_t nx = field.dims.x(), ny = field.dims.y();
-    for (std::size_t r = 0; r < todo.size(); ++r) {
-      const std::int64_t q = todo[r];
-      points.row(Eigen::Index(r)) = field.point(int(q % nx), int((q / nx) % ny), int(q / (nx * ny))).transpose();
-    }
-    const std::vector<SurfaceHit> hits = locators[which]->closest_all(points);
+    const std::vector<SurfaceHit> hits = locators[which]->closest_all(lattice_points(field, todo));
     for (std::size_t r = 0; r < todo.size(); ++r) {
       float& v = values[std::size_t(todo[r])];
       v = std::copysign(float(hits[r].distance), v);
@@ -300,8 +299,6 @@ MorphResult build_morph(const Surface& A, const Surface& B, const MorphOptions& 
   if (options.distances != "exact" && options.distances != "openvdb")
     throw InvalidInput("build_morph: unknown distances '" + options.distances + "' (choose exact, openvdb)");
   const auto start = std::chrono::steady_clock::now();
-  static std::once_flag vdb_init;
-  std::call_once(vdb_init, [] { openvdb::initialize(); });
 
   MorphResult result;
   result.field = morph_lattice(A, B, options);
