@@ -47,9 +47,10 @@ const morphmap::MorphField* sphere_to_bunny(int voxels) {
   return slot.get();
 }
 
-void run(benchmark::State& state, const morphmap::MorphField& field, int time_steps) {
+void run(benchmark::State& state, const morphmap::MorphField& field, int time_steps, bool face_neighbours = false) {
   morphmap::ExtractOptions options;
   options.time_steps = time_steps;
+  options.face_neighbours = face_neighbours;
   std::int64_t tets = 0, vertices = 0, scratch = 0;
   std::size_t source_cells = 0;
   for (auto _ : state) {
@@ -60,10 +61,10 @@ void run(benchmark::State& state, const morphmap::MorphField& field, int time_st
     scratch = result.scratch_bytes;
     benchmark::DoNotOptimize(result.mesh.V.data());
   }
-  // Output arrays: T (4 ints) per tet, and source_cell (8 bytes) when recorded; V (4 doubles) and side (1 byte) per
-  // vertex.
-  const double stage_bytes =
-      double(tets) * 16 + double(source_cells) * 8 + double(vertices) * (32 + 1) + double(scratch);
+  // Output arrays: T (4 ints) per tet, the face neighbours (4 ints) and source_cell (8 bytes) when asked for; V (4
+  // doubles) and side (1 byte) per vertex.
+  const double stage_bytes = double(tets) * (face_neighbours ? 32 : 16) + double(source_cells) * 8 +
+                             double(vertices) * (32 + 1) + double(scratch);
   state.counters["tets"] = double(tets);
   state.counters["tets_per_second"] = benchmark::Counter(double(tets), benchmark::Counter::kIsIterationInvariantRate);
   state.counters["stage_bytes_per_tet"] = stage_bytes / double(tets);
@@ -94,5 +95,17 @@ BENCHMARK(BM_ExtractSphereBunny)
     ->Args({120, 24})
     ->Unit(benchmark::kMillisecond)
     ->UseRealTime();
+
+// The extraction with the face neighbours the tracer reads (ExtractOptions::face_neighbours) against without: their
+// cost here replaces face_neighbours' search of the stars (BM_AdjacencyFaceNeighbours) in the tracer's set-up.
+void BM_ExtractFaceNeighbours(benchmark::State& state) {
+  const morphmap::MorphField* field = sphere_to_bunny(80);
+  if (!field) {
+    state.SkipWithError("bunny_closed.obj not found: set MORPHMAP_MODELS to the models folder");
+    return;
+  }
+  run(state, *field, 16, state.range(0) != 0);
+}
+BENCHMARK(BM_ExtractFaceNeighbours)->Arg(0)->Arg(1)->Unit(benchmark::kMillisecond)->UseRealTime();
 
 }  // namespace

@@ -40,6 +40,17 @@ struct KuhnTable {
   std::array<std::array<int, 5>, 24> corner{};  // corner bitmask of simplex vertex 0..4
   std::array<std::array<int, 4>, 24> axis{};    // axis added between vertex m and m + 1
   std::array<unsigned, 24> corner_set{};        // bit c set when corner c is a vertex of the simplex
+  std::array<int, 256> of_axes{};               // simplex of the axis order a0 a1 a2 a3 (index a0 a1 a2 a3 base 4)
+  // The simplex across facet q (opposite vertex q) of simplex s, in the same cube for q = 1..3 (two steps of the
+  // walk swapped), in the cube one step along axis[s][0] for q = 0 and one step back along axis[s][3] for q = 4
+  // (the walk rotated): the Kuhn triangulation is conforming, so a facet is shared by exactly these two.
+  int across(int s, int q) const {
+    std::array<int, 4> a = axis[std::size_t(s)];
+    if (q == 0) std::rotate(a.begin(), a.begin() + 1, a.end());
+    if (q == 4) std::rotate(a.begin(), a.begin() + 3, a.end());
+    if (q >= 1 && q <= 3) std::swap(a[std::size_t(q) - 1], a[std::size_t(q)]);
+    return of_axes[std::size_t(a[0] * 64 + a[1] * 16 + a[2] * 4 + a[3])];
+  }
   KuhnTable() {
     std::array<int, 4> perm{0, 1, 2, 3};
     int s = 0;
@@ -53,6 +64,7 @@ struct KuhnTable {
         corner[std::size_t(s)][std::size_t(m) + 1] = mask;
         corner_set[std::size_t(s)] |= 1u << mask;
       }
+      of_axes[std::size_t(perm[0] * 64 + perm[1] * 16 + perm[2] * 4 + perm[3])] = s;
       ++s;
     } while (std::next_permutation(perm.begin(), perm.end()));
   }
@@ -228,6 +240,96 @@ inline int bit_count(std::uint32_t x) {
 
 }  // namespace
 
+namespace {
+
+// The facet code of a tet face inside its pentatope's prism (lattice_face_neighbours).
+constexpr int kInsidePrism = 7;
+
+// The tet across every face from the lattice (ExtractOptions::face_neighbours). A face on facet q of its pentatope
+// is held by a tet of the pentatope across that facet (KuhnTable::across), in the same cell or the next one along
+// one axis; a face inside a prism by another tet of the same prism. Either way the holder is among the few tets of
+// one cell (tets are written cell by cell, each cell's in simplex order), found by its three vertex ids. Every
+// entry is written by its own tet, so the result does not depend on the thread count. (face_neighbours settles the
+// same faces from the vertex stars, a search over 6.6 M star entries on cow -> horse.)
+FaceNeighbours lattice_face_neighbours(const TetIndices& T, const std::vector<std::uint32_t>& code,
+                                       const std::vector<std::uint64_t>& layout,
+                                       const std::vector<std::int64_t>& tet_offset,
+                                       const std::vector<std::int64_t>& candidates,
+                                       const std::vector<std::int32_t>& cube_ordinal, const Lattice& lat, int K) {
+  FaceNeighbours result;
+  result.across.reset(new int[std::size_t(T.rows()) * 4]);
+  // Faces no second tet holds (the ends of the morph) keep this.
+  tbb::parallel_for(tbb::blocked_range<std::size_t>(0, std::size_t(T.rows()) * 4), [&](const auto& r) {
+    std::fill(result.across.get() + r.begin(), result.across.get() + r.end(), int(FaceNeighbours::kNoTet));
+  });
+  const std::int64_t slots = std::int64_t(candidates.size()) * K;
+  tbb::parallel_for(tbb::blocked_range<std::int64_t>(0, slots, 256), [&](const tbb::blocked_range<std::int64_t>& r) {
+    for (std::int64_t slot = r.begin(); slot != r.end(); ++slot) {
+      if (tet_offset[std::size_t(slot)] == tet_offset[std::size_t(slot) + 1]) continue;
+      const std::int64_t ordinal = slot / K;
+      const int level = int(slot - ordinal * K);
+      const std::int64_t cube = candidates[std::size_t(ordinal)];
+      const std::int64_t at[3] = {cube % lat.cx, (cube / lat.cx) % lat.cy, cube / (lat.cx * lat.cy)};
+      const std::int64_t extent[3] = {lat.cx, lat.cy, lat.cz}, stride[3] = {1, lat.cx, lat.cx * lat.cy};
+      // The cell one step along axis (direction +-1), as its slot; -1 outside the lattice or where d does not change
+      // sign over the cube.
+      auto step = [&](int axis, int direction) -> std::int64_t {
+        if (axis == 3) return level + direction < 0 || level + direction >= K ? -1 : slot + direction;
+        const std::int64_t moved = at[axis] + direction;
+        if (moved < 0 || moved >= extent[axis]) return -1;
+        const std::int32_t next = cube_ordinal[std::size_t(cube + direction * stride[axis])];
+        return next < 0 ? -1 : std::int64_t(next) * K + level;
+      };
+      for (std::int64_t t = tet_offset[std::size_t(slot)]; t < tet_offset[std::size_t(slot) + 1]; ++t) {
+        const std::uint32_t c = code[std::size_t(t)];
+        const int s = int(c & 31u);
+        for (int k = 0; k < 4; ++k) {
+          // Each shared face is settled by one of its two tets, which writes both entries: the one in the lower
+          // simplex of the cell, the lower tet of a prism, the one in the lower cell along the facet's axis.
+          const int q = int((c >> (5 + 3 * k)) & 7u);
+          if (q == 4) continue;
+          std::int64_t where = slot;
+          int simplex = s;
+          if (q < 5) {
+            simplex = kKuhn.across(s, q);
+            if (q != 0 && simplex < s) continue;
+            if (q == 0) where = step(kKuhn.axis[std::size_t(s)][0], 1);
+          }
+          if (where < 0) continue;
+          int face[3], m = 0;
+          for (int j = 0; j < 4; ++j)
+            if (j != k) face[m++] = T(t, j);
+          // A cell's tets are in simplex order, one for each simplex cut in a tet and three for a prism.
+          const std::uint64_t cut = layout[std::size_t(where)];
+          if (!(cut & (std::uint64_t(1) << simplex))) continue;
+          const std::uint32_t below = (1u << simplex) - 1u;
+          const std::int64_t first = tet_offset[std::size_t(where)] + bit_count(std::uint32_t(cut) & below) +
+                                     2 * bit_count(std::uint32_t(cut >> 32) & below);
+          const std::int64_t last = first + ((cut >> (32 + simplex)) & 1u ? 3 : 1);
+          for (std::int64_t u = q == kInsidePrism ? t + 1 : first; u < last; ++u) {
+            int shared = 0, other = 0;
+            for (int j = 0; j < 4; ++j) {
+              const int v = T(u, j);
+              if (v == face[0] || v == face[1] || v == face[2])
+                ++shared;
+              else
+                other = j;
+            }
+            if (shared == 3) {
+              result.across[std::size_t(t) * 4 + std::size_t(k)] = int(u);
+              result.across[std::size_t(u) * 4 + std::size_t(other)] = int(t);
+              break;
+            }
+          }
+        }
+      }
+    }
+  });
+  return result;
+}
+
+}  // namespace
+
 ExtractResult extract_hypersurface(const MorphField& field, const ExtractOptions& options) {
   const auto start = std::chrono::steady_clock::now();
   if (options.time_steps < 1)
@@ -348,18 +450,23 @@ ExtractResult extract_hypersurface(const MorphField& field, const ExtractOptions
   const std::int64_t slots = std::int64_t(candidates.size()) * K;
   std::vector<std::uint32_t> cell_bits(std::size_t(slots), 0);
   std::vector<std::uint8_t> cell_tets(std::size_t(slots), 0);
+  // For face_neighbours: the simplices of each cell with tets (bits 0-23) and those cut in a prism (bits 32-55).
+  std::vector<std::uint64_t> cell_layout(options.face_neighbours ? std::size_t(slots) : 0, 0);
   std::vector<std::int64_t> chunk_prisms(std::size_t(chunks), 0), chunk_active(std::size_t(chunks), 0);
   for_each_active_cell([&](std::int64_t c, std::size_t slot, const Cell& cell) {
     ++chunk_active[std::size_t(c)];
     cell_bits[slot] = owned_edges(cell, K);
     int tets = 0;
+    std::uint64_t layout = 0;
     for (int s = 0; s < 24; ++s) {
       const int np = bit_count(cell.positive & kKuhn.corner_set[std::size_t(s)]);
       if (np == 0 || np == 5) continue;
       const bool prism = np == 2 || np == 3;
       tets += prism ? 3 : 1;
       chunk_prisms[std::size_t(c)] += prism;
+      layout |= (std::uint64_t(1) << s) | (std::uint64_t(prism) << (32 + s));
     }
+    if (!cell_layout.empty()) cell_layout[slot] = layout;
     cell_tets[slot] = std::uint8_t(tets);
   });
   for (std::int64_t c = 0; c < chunks; ++c) {
@@ -386,6 +493,9 @@ ExtractResult extract_hypersurface(const MorphField& field, const ExtractOptions
   mesh.side.assign(std::size_t(vertex_count), VertexSide::Interior);
   advise_huge_pages(mesh.V.data(), std::size_t(mesh.V.size()) * sizeof(double));
   advise_huge_pages(mesh.T.data(), std::size_t(mesh.T.size()) * sizeof(int));
+  // Per tet, for face_neighbours: its Kuhn simplex (bits 0-4) and, 3 bits a face (face k at bit 5 + 3 k), the facet
+  // of the simplex it lies on, or kInsidePrism.
+  std::vector<std::uint32_t> face_code(options.face_neighbours ? std::size_t(tet_count) : 0);
   if (options.record_source_cells) {
     mesh.source_cell.resize(std::size_t(tet_count));
     advise_huge_pages(mesh.source_cell.data(), mesh.source_cell.size() * sizeof(std::int64_t));
@@ -445,6 +555,20 @@ ExtractResult extract_hypersurface(const MorphField& field, const ExtractOptions
       auto emit = [&](const int tet[4]) {
         mesh.T.row(row) << ids[tet[0]], ids[tet[1]], ids[tet[2]], ids[tet[3]];
         if (options.record_source_cells) mesh.source_cell[std::size_t(row)] = source_base + s;
+        if (options.face_neighbours) {
+          // The face opposite tet[k] lies on the facet opposite the simplex vertex none of its crossing edges touch.
+          std::uint32_t code = std::uint32_t(s);
+          for (int k = 0; k < 4; ++k) {
+            unsigned touched = 0;
+            for (int j = 0; j < 4; ++j)
+              if (j != k) touched |= (1u << pc.a[tet[j]]) | (1u << pc.b[tet[j]]);
+            std::uint32_t facet = std::uint32_t(kInsidePrism);
+            for (int q = 0; q < 5; ++q)
+              if (!(touched & (1u << cm[std::size_t(q)]))) facet = std::uint32_t(q);
+            code |= facet << (5 + 3 * k);
+          }
+          face_code[std::size_t(row)] = code;
+        }
         ++row;
       };
       if (pc.edges == 4) {
@@ -455,6 +579,10 @@ ExtractResult extract_hypersurface(const MorphField& field, const ExtractOptions
       }
     }
   });
+
+  if (options.face_neighbours)
+    result.across =
+        lattice_face_neighbours(mesh.T, face_code, cell_layout, tet_offset, candidates, cube_ordinal, lat, K);
 
   result.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
   return result;

@@ -5,6 +5,7 @@
 #include <cstdint>
 #include <functional>
 
+#include "mesh/adjacency.h"
 #include "mesh/morph.h"
 #include "mesh/tet_mesh4.h"
 
@@ -28,6 +29,10 @@ struct ExtractOptions {
   /// Also record each tet's lattice cell and Kuhn simplex (TetMesh4::source_cell): 8 bytes a tet, live for the whole
   /// run, that no stage of the pipeline reads (off: source_cell stays empty).
   bool record_source_cells = false;
+  /// Also find the tet across every face of every tet (ExtractResult::across, what face_neighbours finds from the
+  /// vertex stars) from the lattice: a face lies on a facet of its pentatope, whose neighbour pentatope is known from
+  /// the Kuhn permutation, or inside a prism. 16 bytes a tet in the result, and 4 more during extraction.
+  bool face_neighbours = false;
 };
 
 struct ExtractResult {
@@ -39,6 +44,7 @@ struct ExtractResult {
   std::int64_t snapped_values = 0;  ///< values of dA and dB within zero_snap of zero (moved off zero)
   std::int64_t prisms = 0;          ///< pentatopes cut in a prism (2|3 split), 3 tets each
   std::int64_t scratch_bytes = 0;   ///< per-cell tables used besides the output mesh
+  FaceNeighbours across;            ///< when ExtractOptions::face_neighbours: face_neighbours(mesh.T, stars) exactly
 };
 
 /// Extracts the tetrahedral mesh; throws TopologyError when the morph has no zero crossing.

@@ -209,6 +209,35 @@ void star_sums(const TetMesh4& mesh, const VertexTets& adj, const Points4& field
   });
 }
 
+// A tet's vertices and the tets across its faces side by side, two tets a cache line: a piece that leaves its tet
+// through a face reads the neighbour's index and then that neighbour's vertices, two dependent misses when T and the
+// face table were separate arrays.
+struct alignas(32) TetRecord {
+  int v[4];       // T's row
+  int across[4];  // FaceNeighbours::across of the tet (face opposite v[k])
+};
+struct TetRecords {
+  std::unique_ptr<TetRecord[]> records;
+  bool known = false;  // FaceNeighbours::known()
+  const TetRecord& at(int t) const { return records[std::size_t(t)]; }
+};
+
+TetRecords tet_records(const TetIndices& T, const FaceNeighbours& across) {
+  TetRecords out;
+  out.known = across.known();
+  out.records.reset(new TetRecord[std::size_t(T.rows())]);
+  tbb::parallel_for(tbb::blocked_range<Eigen::Index>(0, T.rows()), [&](const tbb::blocked_range<Eigen::Index>& r) {
+    for (Eigen::Index t = r.begin(); t != r.end(); ++t) {
+      TetRecord& rec = out.records[std::size_t(t)];
+      for (int k = 0; k < 4; ++k) {
+        rec.v[k] = T(t, k);
+        rec.across[k] = out.known ? across.across[std::size_t(t) * 4 + std::size_t(k)] : FaceNeighbours::kManyTets;
+      }
+    }
+  });
+  return out;
+}
+
 struct Stats {
   std::int64_t pieces[5] = {0, 0, 0, 0, 0};  // by simplex size
   std::int64_t evaluations = 0;              // of the weight rates, in integrate() and choose(); descent steps
@@ -219,13 +248,13 @@ struct Stats {
 class Tracer {
  public:
   Tracer(const TetMesh4& mesh, const Eigen::VectorXd& s, const Eigen::MatrixXd& field, const TraceOptions& options,
-         const SharedStars& stars)
+         const SharedStars& stars, FaceNeighbours across)
       : mesh_(mesh),
         s_(s),
         options_(options),
         stars_(stars_or_build(stars, mesh.T, mesh.vertex_count())),
         adj_(*stars_),
-        across_(face_neighbours(mesh.T, adj_)) {
+        tets_(tet_records(mesh.T, across.known() ? std::move(across) : face_neighbours(mesh.T, adj_))) {
     // The normals ride along with the first smoothing pass (or walk the stars alone without one).
     field_ = field;
     for (int pass = 0; pass < std::max(1, options.field_smoothing); ++pass) {
@@ -314,7 +343,7 @@ class Tracer {
 
   bool contains(int t, int v) const {
     for (int k = 0; k < 4; ++k)
-      if (mesh_.T(t, k) == v) return true;
+      if (tets_.at(t).v[k] == v) return true;
     return false;
   }
 
@@ -439,9 +468,10 @@ class Tracer {
     out.clear();
     if (n == 3 && from_tet >= 0) {
       int k = 0;
-      while (k < 4 && among(ids, 3, mesh_.T(from_tet, k))) ++k;
-      if (k < 4 && across_.known()) {
-        const int other = across_.across[std::size_t(from_tet) * 4 + std::size_t(k)];
+      const TetRecord& from = tets_.at(from_tet);
+      while (k < 4 && among(ids, 3, from.v[k])) ++k;
+      if (k < 4 && tets_.known) {
+        const int other = from.across[k];
         if (other != FaceNeighbours::kManyTets) {
           out.push_back(from_tet);
           if (other >= 0) out.insert(other < from_tet ? out.begin() : out.end(), other);
@@ -515,8 +545,9 @@ class Tracer {
   // has no system, or does not hold the face by exactly one vertex more (never, for a tet across a face).
   bool tet_through_face(const std::array<int, 4>& ids, int t, Simplex& x) const {
     int other = -1;
+    const TetRecord& tet = tets_.at(t);
     for (int k = 0; k < 4; ++k) {
-      const int v = mesh_.T(t, k);
+      const int v = tet.v[k];
       if (among(ids, 3, v)) continue;
       if (other >= 0) return false;
       other = v;
@@ -525,6 +556,9 @@ class Tracer {
     x.size = 4;
     x.tet = t;
     x.ids = {{ids[0], ids[1], ids[2], other}};
+    // The piece will leave t through one of its faces: fetch the neighbours' records while it is integrated.
+    for (int k = 0; k < 4; ++k)
+      if (tet.across[k] >= 0) __builtin_prefetch(&tets_.at(tet.across[k]));
     return simplex_system<3, true>(mesh_, field_, normals_, x);
   }
 
@@ -539,8 +573,9 @@ class Tracer {
     for (const int t : candidates) {
       std::array<int, 4> others{{-1, -1, -1, -1}};
       int m = 0;
+      const TetRecord& tet = tets_.at(t);
       for (int k = 0; k < 4; ++k) {
-        const int v = mesh_.T(t, k);
+        const int v = tet.v[k];
         if (!among(ids, n, v)) others[std::size_t(m++)] = v;
       }
       const int extra = size - n;
@@ -758,10 +793,14 @@ class Tracer {
   SharedStars stars_;
   const VertexTets& adj_;
   Points4 normals_;  // #V by 4 unit vertex normals
-  // The tet across each face, found up front for every face (face_neighbours): before 2026-12-07 the tracer searched
-  // three vertex stars for a face the first time a trace crossed it, 1.31 M searches on cow -> horse (56% of its
-  // face crossings, 5% of the run), where settling all 3.3 M faces from the stars takes a fraction of that.
-  const FaceNeighbours across_;
+  // The tet across each face, found up front for every face (face_neighbours, or the extraction's): before 2026-12-07
+  // the tracer searched three vertex stars for a face the first time a trace crossed it, 1.31 M searches on cow ->
+  // horse (56% of its face crossings, 5% of the run), where settling all 3.3 M faces from the stars takes a fraction
+  // of that. Kept beside T's rows (TetRecord): BM_Trace/cow_horse 762-876 -> 721-819 ms, three alternating pairs; and
+  // the neighbours' records prefetched on entering a tet (tet_through_face): 718-855 -> 652-750 ms, four pairs.
+  // Prefetching also the vertex data beyond the likely exit face, once the piece's first rates are known, was slower
+  // (638-697 -> 671-741 ms, four pairs).
+  const TetRecords tets_;
 };
 
 }  // namespace
@@ -784,8 +823,8 @@ std::vector<MeshPoint> edge_points(const Eigen::MatrixXi& edge, const Eigen::Vec
 
 struct CharacteristicTracer::Impl {
   Impl(const TetMesh4& mesh, const Eigen::VectorXd& s, const Eigen::MatrixXd& field, const TraceOptions& options,
-       const SharedStars& stars)
-      : mesh(mesh), options(options), tracer(mesh, s, field, this->options, stars) {}
+       const SharedStars& stars, FaceNeighbours across)
+      : mesh(mesh), options(options), tracer(mesh, s, field, this->options, stars, std::move(across)) {}
   const TetMesh4& mesh;
   const TraceOptions options;  // the tracer keeps a reference to this copy
   const Tracer tracer;
@@ -848,9 +887,10 @@ std::vector<std::size_t> spatial_order(const TetMesh4& mesh, const std::vector<M
 
 CharacteristicTracer::CharacteristicTracer(const TetMesh4& mesh, const Eigen::VectorXd& s,
                                            const Eigen::MatrixXd& vertex_field, const TraceOptions& options,
-                                           const SharedStars& stars) {
+                                           const SharedStars& stars, FaceNeighbours across) {
   const auto start_time = std::chrono::steady_clock::now();
-  impl_ = std::make_unique<Impl>(checked(mesh, s, vertex_field, options), s, vertex_field, options, stars);
+  impl_ = std::make_unique<Impl>(checked(mesh, s, vertex_field, options), s, vertex_field, options, stars,
+                                 std::move(across));
   impl_->setup_seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - start_time).count();
 }
 

@@ -91,11 +91,13 @@ struct TraceResult {
 /// The tracer as a stateful object: vertex stars, vertex normals and the smoothed field are built once by the
 /// constructor (which checks the inputs and throws InvalidInput naming the problem), so the target and every slice
 /// are traced without rebuilding them (or the stars are the caller's, `stars`). `mesh`, `s` and `vertex_field` must
-/// outlive it.
+/// outlive it. `across`, when known, must be face_neighbours(mesh.T, stars) (as extraction finds them,
+/// ExtractOptions::face_neighbours), and is then not searched again.
 class CharacteristicTracer {
  public:
   CharacteristicTracer(const TetMesh4& mesh, const Eigen::VectorXd& s, const Eigen::MatrixXd& vertex_field,
-                       const TraceOptions& options = {}, const SharedStars& stars = nullptr);
+                       const TraceOptions& options = {}, const SharedStars& stars = nullptr,
+                       FaceNeighbours across = {});
   ~CharacteristicTracer();
   CharacteristicTracer(const CharacteristicTracer&) = delete;
   CharacteristicTracer& operator=(const CharacteristicTracer&) = delete;

@@ -104,6 +104,37 @@ TEST_P(ExtractManifold, InteriorFacesSharedByTwoTetsBoundaryOnlyAtEnds) {
   }
 }
 
+// The lattice's face neighbours are the stars' (face_neighbours), entry for entry: the facet rule of the Kuhn
+// triangulation, the prism-internal faces and the ends of the morph (no tet across) all agree.
+TEST_P(ExtractManifold, FaceNeighboursFromTheLatticeAreTheStars) {
+  const ManifoldCase c = manifold_cases()[std::size_t(GetParam())];
+  const MorphField field = analytic_field(c.a, c.b, 1.05, 0.1);
+  ExtractOptions options;
+  options.time_steps = c.time_steps;
+  const ExtractResult plain = extract_hypersurface(field, options);
+  EXPECT_FALSE(plain.across.known());
+  options.face_neighbours = true;
+  const ExtractResult result = extract_hypersurface(field, options);
+  const TetMesh4& mesh = result.mesh;
+  ASSERT_TRUE((plain.mesh.T.array() == mesh.T.array()).all()) << c.name << ": the mesh changed";
+  ASSERT_TRUE(result.across.known()) << c.name;
+  const FaceNeighbours stars = face_neighbours(mesh.T, build_vertex_tets(mesh.T, mesh.vertex_count()));
+  ASSERT_TRUE(stars.known());
+  std::int64_t differ = 0, boundary = 0, shared = 0;
+  for (std::size_t e = 0; e < std::size_t(mesh.tet_count()) * 4; ++e) {
+    differ += result.across.across[e] != stars.across[e];
+    (stars.across[e] == FaceNeighbours::kNoTet ? boundary : shared) += 1;
+  }
+  EXPECT_EQ(differ, 0) << c.name;
+  EXPECT_GT(boundary, 0) << c.name;
+  EXPECT_GT(shared, boundary) << c.name;
+  // And the same on one thread.
+  tbb::global_control one(tbb::global_control::max_allowed_parallelism, 1);
+  const ExtractResult serial = extract_hypersurface(field, options);
+  EXPECT_TRUE(std::equal(serial.across.across.get(), serial.across.across.get() + mesh.tet_count() * 4,
+                         result.across.across.get()));
+}
+
 INSTANTIATE_TEST_SUITE_P(Cases, ExtractManifold, ::testing::Range(0, 4));
 
 TEST(Extract, OrientationPointsTowardIncreasingField) {
