@@ -281,9 +281,9 @@ long long estimate_peak_memory(std::int64_t lattice_points, std::int64_t tets, s
   // 160 voxels and 16 steps 3.06 GB (21.0M, 3.6M, 3.8M lattice points), and the demo at 20 voxels and 5 steps
   // 0.132 GB (0.34M tets; the base is the libraries and, there, rendering the contact sheet). Per tet: the mesh, the
   // stars, the local stiffness and the CSC matrix; per vertex: positions, s, solver vectors, the field, labels.
-  // 2026-12-07 (night): 16 bytes a tet more, the face neighbours the extraction now finds for the tracer and which
-  // are held through the Laplace stage (demo 0.392 -> 0.434 GB, cow -> horse 0.295 -> 0.324 GB).
-  constexpr double kBase = 95e6, kPerLatticePoint = 12.0, kPerTet = 138.0, kPerVertex = 160.0;
+  // 2026-12-08: 8 bytes a tet more, the extraction's record of the lattice faces (ExtractResult::faces), held for the
+  // tracer through the Laplace stage (demo 0.392 -> 0.409 GB, cow -> horse 0.282 -> 0.305 GB).
+  constexpr double kBase = 95e6, kPerLatticePoint = 12.0, kPerTet = 130.0, kPerVertex = 160.0;
   return (long long)(kBase + kPerLatticePoint * double(lattice_points) + kPerTet * double(tets) +
                      kPerVertex * double(vertices));
 }
@@ -675,7 +675,8 @@ PipelineResult run_pipeline(const PipelineOptions& options) {
   // Built once for the target and every slice.
   std::optional<CharacteristicTracer> tracer;
   if (options.method == "trace") {
-    tracer.emplace(mesh, laplace.s, gradient.vertex_field, options.trace, stars, std::move(extract.across));
+    tracer.emplace(mesh, laplace.s, gradient.vertex_field, options.trace, stars, &extract.faces);
+    extract.faces = LatticeFaces{};
     traced_total.seconds += tracer->setup_seconds();
   }
   auto add_trace = [&](const TraceResult& traced) {

@@ -1,5 +1,6 @@
 // The passes over the 4D mesh's vertex stars that every stage after the extraction shares (mesh/adjacency.h): the
-// stars themselves (build_vertex_tets) and the tracer's face neighbours (face_neighbours), on cow -> horse at 63
+// stars themselves (build_vertex_tets) and the tracer's face neighbours (face_neighbours, and
+// lattice_face_neighbours from the extraction's record), on cow -> horse at 63
 // voxels and 10 time steps (1.66 M tets), the Table II row they matter most for.
 // Run: morphmap_bench --benchmark_filter=BM_Adjacency --benchmark_repetitions=5
 // The morph and the extraction are built once, not timed.
@@ -17,6 +18,7 @@ namespace {
 
 struct MeshCase {
   morphmap::TetMesh4 mesh;
+  morphmap::LatticeFaces faces;
   std::string error;
 };
 
@@ -31,7 +33,11 @@ const MeshCase& cow_horse() {
   morph_options.voxels = 63;
   morphmap::ExtractOptions extract_options;
   extract_options.time_steps = 10;
-  c->mesh = morphmap::extract_hypersurface(morphmap::build_morph(A, B, morph_options).field, extract_options).mesh;
+  extract_options.face_neighbours = true;
+  morphmap::ExtractResult extract =
+      morphmap::extract_hypersurface(morphmap::build_morph(A, B, morph_options).field, extract_options);
+  c->mesh = std::move(extract.mesh);
+  c->faces = std::move(extract.faces);
   return *c;
 }
 
@@ -62,7 +68,22 @@ void BM_AdjacencyFaceNeighbours(benchmark::State& state) {
   state.SetLabel(std::to_string(c.mesh.tet_count()) + " tets");
 }
 
+// The same neighbours from the extraction's lattice record (what the pipeline's tracer uses).
+void BM_AdjacencyLatticeFaceNeighbours(benchmark::State& state) {
+  const MeshCase& c = cow_horse();
+  if (!c.error.empty()) {
+    state.SkipWithError(c.error.c_str());
+    return;
+  }
+  for (auto _ : state) {
+    const morphmap::FaceNeighbours across = morphmap::lattice_face_neighbours(c.faces, c.mesh.T);
+    benchmark::DoNotOptimize(across.across.get());
+  }
+  state.SetLabel(std::to_string(c.mesh.tet_count()) + " tets");
+}
+
 }  // namespace
 
 BENCHMARK(BM_AdjacencyStars)->Unit(benchmark::kMillisecond)->UseRealTime();
 BENCHMARK(BM_AdjacencyFaceNeighbours)->Unit(benchmark::kMillisecond)->UseRealTime();
+BENCHMARK(BM_AdjacencyLatticeFaceNeighbours)->Unit(benchmark::kMillisecond)->UseRealTime();

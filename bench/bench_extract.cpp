@@ -61,9 +61,9 @@ void run(benchmark::State& state, const morphmap::MorphField& field, int time_st
     scratch = result.scratch_bytes;
     benchmark::DoNotOptimize(result.mesh.V.data());
   }
-  // Output arrays: T (4 ints) per tet, the face neighbours (4 ints) and source_cell (8 bytes) when asked for; V (4
-  // doubles) and side (1 byte) per vertex.
-  const double stage_bytes = double(tets) * (face_neighbours ? 32 : 16) + double(source_cells) * 8 +
+  // Output arrays: T (4 ints) per tet, the faces' codes (4 bytes; the per-cell tables are scratch_bytes) and
+  // source_cell (8 bytes) when asked for; V (4 doubles) and side (1 byte) per vertex.
+  const double stage_bytes = double(tets) * (face_neighbours ? 20 : 16) + double(source_cells) * 8 +
                              double(vertices) * (32 + 1) + double(scratch);
   state.counters["tets"] = double(tets);
   state.counters["tets_per_second"] = benchmark::Counter(double(tets), benchmark::Counter::kIsIterationInvariantRate);
@@ -96,8 +96,7 @@ BENCHMARK(BM_ExtractSphereBunny)
     ->Unit(benchmark::kMillisecond)
     ->UseRealTime();
 
-// The extraction with the face neighbours the tracer reads (ExtractOptions::face_neighbours) against without: their
-// cost here replaces face_neighbours' search of the stars (BM_AdjacencyFaceNeighbours) in the tracer's set-up.
+// The extraction recording the lattice faces (ExtractOptions::face_neighbours) against without.
 void BM_ExtractFaceNeighbours(benchmark::State& state) {
   const morphmap::MorphField* field = sphere_to_bunny(80);
   if (!field) {

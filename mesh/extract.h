@@ -4,6 +4,7 @@
 
 #include <cstdint>
 #include <functional>
+#include <vector>
 
 #include "mesh/adjacency.h"
 #include "mesh/morph.h"
@@ -29,11 +30,33 @@ struct ExtractOptions {
   /// Also record each tet's lattice cell and Kuhn simplex (TetMesh4::source_cell): 8 bytes a tet, live for the whole
   /// run, that no stage of the pipeline reads (off: source_cell stays empty).
   bool record_source_cells = false;
-  /// Also find the tet across every face of every tet (ExtractResult::across, what face_neighbours finds from the
-  /// vertex stars) from the lattice: a face lies on a facet of its pentatope, whose neighbour pentatope is known from
-  /// the Kuhn permutation, or inside a prism. 16 bytes a tet in the result, and 4 more during extraction.
+  /// Also record what lattice_face_neighbours needs to find the tet across every face of every tet
+  /// (ExtractResult::faces): 4 bytes a tet and 16 a cell, where the neighbours themselves take 16 a tet.
   bool face_neighbours = false;
 };
+
+/// The tets' places in the lattice, from which lattice_face_neighbours finds every face's neighbour. A cell is
+/// (candidate cube ordinal) * time_steps + (time level); its tets are consecutive, in Kuhn simplex order.
+struct LatticeFaces {
+  std::vector<std::uint32_t> code;         ///< #T: Kuhn simplex (bits 0-4); per face k (3 bits at 5 + 3 k) the facet
+                                           ///< of the simplex it lies on (0-4), or 7 inside a prism
+  std::vector<std::uint64_t> layout;       ///< per cell: the simplices with tets (bits 0-23), cut in a prism (32-55)
+  std::vector<std::int64_t> tet_offset;    ///< cells + 1: the first tet of each cell
+  std::vector<std::int64_t> candidates;    ///< the lattice cubes where d can change sign, in ordinal order
+  std::vector<std::int32_t> cube_ordinal;  ///< per lattice cube: its ordinal among `candidates`, or -1
+  std::int64_t cx = 0, cy = 0, cz = 0;     ///< lattice cubes per axis
+  int time_steps = 0;                      ///< K
+  bool known() const { return !code.empty(); }
+};
+
+/// The tet across every face (face_neighbours' result for the extracted mesh T, entry for entry), from the lattice: a
+/// face on facet q of its pentatope is held by a tet of the pentatope across that facet, which the Kuhn permutation
+/// names, in the same cell or the next along one axis; a face inside a prism by another tet of that prism. Unknown
+/// (FaceNeighbours::known() false) when `faces` is empty.
+FaceNeighbours lattice_face_neighbours(const LatticeFaces& faces, const TetIndices& T);
+/// The same written to across[t * stride + k] (stride >= 4), e.g. into the tracer's per-tet records; throws
+/// InvalidInput when `faces` is empty or not T's.
+void lattice_face_neighbours(const LatticeFaces& faces, const TetIndices& T, int* across, std::size_t stride);
 
 struct ExtractResult {
   TetMesh4 mesh;
@@ -44,7 +67,7 @@ struct ExtractResult {
   std::int64_t snapped_values = 0;  ///< values of dA and dB within zero_snap of zero (moved off zero)
   std::int64_t prisms = 0;          ///< pentatopes cut in a prism (2|3 split), 3 tets each
   std::int64_t scratch_bytes = 0;   ///< per-cell tables used besides the output mesh
-  FaceNeighbours across;            ///< when ExtractOptions::face_neighbours: face_neighbours(mesh.T, stars) exactly
+  LatticeFaces faces;               ///< when ExtractOptions::face_neighbours, else empty
 };
 
 /// Extracts the tetrahedral mesh; throws TopologyError when the morph has no zero crossing.

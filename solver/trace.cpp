@@ -21,6 +21,7 @@
 
 #include "mesh/adjacency.h"
 #include "mesh/errors.h"
+#include "mesh/extract.h"
 
 namespace morphmap {
 
@@ -222,19 +223,25 @@ struct TetRecords {
   const TetRecord& at(int t) const { return records[std::size_t(t)]; }
 };
 
-TetRecords tet_records(const TetIndices& T, const FaceNeighbours& across) {
+// The records of T, their neighbours from the extraction's lattice record when there is one, else from the stars.
+TetRecords tet_records(const TetIndices& T, const VertexTets& stars, const LatticeFaces* faces) {
   TetRecords out;
-  out.known = across.known();
   out.records.reset(new TetRecord[std::size_t(T.rows())]);
+  const bool lattice = faces != nullptr && faces->known();
+  const FaceNeighbours searched = lattice ? FaceNeighbours{} : face_neighbours(T, stars);
+  out.known = lattice || searched.known();
   tbb::parallel_for(tbb::blocked_range<Eigen::Index>(0, T.rows()), [&](const tbb::blocked_range<Eigen::Index>& r) {
     for (Eigen::Index t = r.begin(); t != r.end(); ++t) {
       TetRecord& rec = out.records[std::size_t(t)];
       for (int k = 0; k < 4; ++k) {
         rec.v[k] = T(t, k);
-        rec.across[k] = out.known ? across.across[std::size_t(t) * 4 + std::size_t(k)] : FaceNeighbours::kManyTets;
+        rec.across[k] =
+            searched.known() ? searched.across[std::size_t(t) * 4 + std::size_t(k)] : FaceNeighbours::kManyTets;
       }
     }
   });
+  // Written straight into the records (no 16-byte-a-tet table beside them).
+  if (lattice) lattice_face_neighbours(*faces, T, &out.records[0].across[0], sizeof(TetRecord) / sizeof(int));
   return out;
 }
 
@@ -248,13 +255,13 @@ struct Stats {
 class Tracer {
  public:
   Tracer(const TetMesh4& mesh, const Eigen::VectorXd& s, const Eigen::MatrixXd& field, const TraceOptions& options,
-         const SharedStars& stars, FaceNeighbours across)
+         const SharedStars& stars, const LatticeFaces* faces)
       : mesh_(mesh),
         s_(s),
         options_(options),
         stars_(stars_or_build(stars, mesh.T, mesh.vertex_count())),
         adj_(*stars_),
-        tets_(tet_records(mesh.T, across.known() ? std::move(across) : face_neighbours(mesh.T, adj_))) {
+        tets_(tet_records(mesh.T, adj_, faces)) {
     // The normals ride along with the first smoothing pass (or walk the stars alone without one).
     field_ = field;
     for (int pass = 0; pass < std::max(1, options.field_smoothing); ++pass) {
@@ -823,8 +830,8 @@ std::vector<MeshPoint> edge_points(const Eigen::MatrixXi& edge, const Eigen::Vec
 
 struct CharacteristicTracer::Impl {
   Impl(const TetMesh4& mesh, const Eigen::VectorXd& s, const Eigen::MatrixXd& field, const TraceOptions& options,
-       const SharedStars& stars, FaceNeighbours across)
-      : mesh(mesh), options(options), tracer(mesh, s, field, this->options, stars, std::move(across)) {}
+       const SharedStars& stars, const LatticeFaces* faces)
+      : mesh(mesh), options(options), tracer(mesh, s, field, this->options, stars, faces) {}
   const TetMesh4& mesh;
   const TraceOptions options;  // the tracer keeps a reference to this copy
   const Tracer tracer;
@@ -887,10 +894,9 @@ std::vector<std::size_t> spatial_order(const TetMesh4& mesh, const std::vector<M
 
 CharacteristicTracer::CharacteristicTracer(const TetMesh4& mesh, const Eigen::VectorXd& s,
                                            const Eigen::MatrixXd& vertex_field, const TraceOptions& options,
-                                           const SharedStars& stars, FaceNeighbours across) {
+                                           const SharedStars& stars, const LatticeFaces* faces) {
   const auto start_time = std::chrono::steady_clock::now();
-  impl_ = std::make_unique<Impl>(checked(mesh, s, vertex_field, options), s, vertex_field, options, stars,
-                                 std::move(across));
+  impl_ = std::make_unique<Impl>(checked(mesh, s, vertex_field, options), s, vertex_field, options, stars, faces);
   impl_->setup_seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - start_time).count();
 }
 

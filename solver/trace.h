@@ -24,6 +24,8 @@
 
 namespace morphmap {
 
+struct LatticeFaces;
+
 struct TraceOptions {
   /// A barycentric weight at or below this counts as zero: the point lies on the opposite face.
   double weight_epsilon = 1e-12;
@@ -91,13 +93,13 @@ struct TraceResult {
 /// The tracer as a stateful object: vertex stars, vertex normals and the smoothed field are built once by the
 /// constructor (which checks the inputs and throws InvalidInput naming the problem), so the target and every slice
 /// are traced without rebuilding them (or the stars are the caller's, `stars`). `mesh`, `s` and `vertex_field` must
-/// outlive it. `across`, when known, must be face_neighbours(mesh.T, stars) (as extraction finds them,
-/// ExtractOptions::face_neighbours), and is then not searched again.
+/// outlive it. `faces`, the extraction's record of mesh (ExtractOptions::face_neighbours), gives the tet across
+/// every face (lattice_face_neighbours) where the stars are searched without it (face_neighbours).
 class CharacteristicTracer {
  public:
   CharacteristicTracer(const TetMesh4& mesh, const Eigen::VectorXd& s, const Eigen::MatrixXd& vertex_field,
                        const TraceOptions& options = {}, const SharedStars& stars = nullptr,
-                       FaceNeighbours across = {});
+                       const LatticeFaces* faces = nullptr);
   ~CharacteristicTracer();
   CharacteristicTracer(const CharacteristicTracer&) = delete;
   CharacteristicTracer& operator=(const CharacteristicTracer&) = delete;

@@ -112,17 +112,19 @@ TEST_P(ExtractManifold, FaceNeighboursFromTheLatticeAreTheStars) {
   ExtractOptions options;
   options.time_steps = c.time_steps;
   const ExtractResult plain = extract_hypersurface(field, options);
-  EXPECT_FALSE(plain.across.known());
+  EXPECT_FALSE(plain.faces.known());
+  EXPECT_FALSE(lattice_face_neighbours(plain.faces, plain.mesh.T).known());
   options.face_neighbours = true;
   const ExtractResult result = extract_hypersurface(field, options);
   const TetMesh4& mesh = result.mesh;
   ASSERT_TRUE((plain.mesh.T.array() == mesh.T.array()).all()) << c.name << ": the mesh changed";
-  ASSERT_TRUE(result.across.known()) << c.name;
+  const FaceNeighbours lattice = lattice_face_neighbours(result.faces, mesh.T);
+  ASSERT_TRUE(lattice.known()) << c.name;
   const FaceNeighbours stars = face_neighbours(mesh.T, build_vertex_tets(mesh.T, mesh.vertex_count()));
   ASSERT_TRUE(stars.known());
   std::int64_t differ = 0, boundary = 0, shared = 0;
   for (std::size_t e = 0; e < std::size_t(mesh.tet_count()) * 4; ++e) {
-    differ += result.across.across[e] != stars.across[e];
+    differ += lattice.across[e] != stars.across[e];
     (stars.across[e] == FaceNeighbours::kNoTet ? boundary : shared) += 1;
   }
   EXPECT_EQ(differ, 0) << c.name;
@@ -130,9 +132,10 @@ TEST_P(ExtractManifold, FaceNeighboursFromTheLatticeAreTheStars) {
   EXPECT_GT(shared, boundary) << c.name;
   // And the same on one thread.
   tbb::global_control one(tbb::global_control::max_allowed_parallelism, 1);
-  const ExtractResult serial = extract_hypersurface(field, options);
-  EXPECT_TRUE(std::equal(serial.across.across.get(), serial.across.across.get() + mesh.tet_count() * 4,
-                         result.across.across.get()));
+  const FaceNeighbours serial = lattice_face_neighbours(extract_hypersurface(field, options).faces, mesh.T);
+  EXPECT_TRUE(std::equal(serial.across.get(), serial.across.get() + mesh.tet_count() * 4, lattice.across.get()));
+  // Faces of another mesh are refused.
+  EXPECT_THROW(lattice_face_neighbours(result.faces, plain.mesh.T.topRows(mesh.tet_count() - 1)), InvalidInput);
 }
 
 INSTANTIATE_TEST_SUITE_P(Cases, ExtractManifold, ::testing::Range(0, 4));
