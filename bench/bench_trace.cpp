@@ -1,7 +1,8 @@
 // Characteristic tracing (paper §7, solver/trace.h) on the Table II morphs as the pipeline maps them: sphere ->
 // torus at 13 voxels and cow -> horse at 63 voxels, 10 time steps, the default time scale (twice the box), the
-// field solved by the default backend. Each iteration builds the tracer (vertex stars, normals, smoothed field)
-// and traces every vertex of the extracted B back to A, as `morphmap map` does for target.obj.
+// field solved by the default backend. Each iteration builds the tracer (vertex stars, the tet records with their
+// face neighbours from the extraction's lattice record, normals, smoothed field) and traces every vertex of the
+// extracted B back to A, as `morphmap map` does for target.obj.
 //
 // BM_Trace/<morph>: counters traces, reached, descended, stalled, tet_pieces, evaluations (of the weight ODE: the
 // tracer's work, which machine load does not change), descent_pieces, seconds_per_trace. The pipeline also traces
@@ -27,6 +28,7 @@ namespace {
 
 struct TraceCase {
   morphmap::TetMesh4 mesh;
+  morphmap::LatticeFaces faces;  ///< the extraction's record, from which the pipeline's tracer takes face neighbours
   Eigen::VectorXd s;
   Eigen::MatrixXd field;  ///< #V by 4 vertex field T
   std::vector<morphmap::MeshPoint> starts;
@@ -45,7 +47,11 @@ const TraceCase& trace_case(const std::string& morph, int voxels) {
   morph_options.voxels = voxels;
   morphmap::ExtractOptions extract_options;
   extract_options.time_steps = 10;
-  slot->mesh = morphmap::extract_hypersurface(morphmap::build_morph(A, B, morph_options).field, extract_options).mesh;
+  extract_options.face_neighbours = true;
+  morphmap::ExtractResult extract =
+      morphmap::extract_hypersurface(morphmap::build_morph(A, B, morph_options).field, extract_options);
+  slot->mesh = std::move(extract.mesh);
+  slot->faces = std::move(extract.faces);
   slot->s = morphmap::solve_harmonic(slot->mesh, morphmap::LaplaceOptions{}).s;
   slot->field = morphmap::compute_gradient(slot->mesh, slot->s).vertex_field;
   const morphmap::SliceMesh b = morphmap::target_boundary(slot->mesh, slot->mesh.V.leftCols(3));
@@ -61,7 +67,7 @@ void BM_Trace(benchmark::State& state, const std::string& morph, int voxels) {
   }
   morphmap::TraceResult r;
   for (auto _ : state) {
-    const morphmap::CharacteristicTracer tracer(c.mesh, c.s, c.field);
+    const morphmap::CharacteristicTracer tracer(c.mesh, c.s, c.field, morphmap::TraceOptions{}, nullptr, &c.faces);
     r = tracer.trace(c.starts);
     benchmark::DoNotOptimize(r.end.data());
   }
@@ -78,8 +84,9 @@ void BM_Trace(benchmark::State& state, const std::string& morph, int voxels) {
   state.SetLabel(std::to_string(c.mesh.tet_count()) + " tets");
 }
 
-// The tracer's set-up alone, with the stars given as the pipeline gives them: face neighbours, vertex normals and the
-// smoothed field (BM_AdjacencyFaceNeighbours times the first).
+// The tracer's set-up alone, with the stars and the lattice record given as the pipeline gives them: the tet records
+// and their face neighbours, vertex normals and the smoothed field (BM_AdjacencyLatticeFaceNeighbours times the
+// second).
 void BM_TracerSetup(benchmark::State& state, const std::string& morph, int voxels) {
   const TraceCase& c = trace_case(morph, voxels);
   if (!c.error.empty()) {
@@ -89,7 +96,7 @@ void BM_TracerSetup(benchmark::State& state, const std::string& morph, int voxel
   const morphmap::SharedStars stars =
       std::make_shared<const morphmap::VertexTets>(morphmap::build_vertex_tets(c.mesh.T, c.mesh.vertex_count()));
   for (auto _ : state) {
-    const morphmap::CharacteristicTracer tracer(c.mesh, c.s, c.field, morphmap::TraceOptions{}, stars);
+    const morphmap::CharacteristicTracer tracer(c.mesh, c.s, c.field, morphmap::TraceOptions{}, stars, &c.faces);
     benchmark::DoNotOptimize(&tracer);
   }
   state.SetLabel(std::to_string(c.mesh.tet_count()) + " tets");
