@@ -34,6 +34,9 @@
 namespace morphmap {
 namespace {
 
+// The facet code of a tet face inside its pentatope's prism (PentatopeCase, LatticeFaces::code).
+constexpr int kInsidePrism = 7;
+
 // Kuhn simplex s of the unit hypercube walks from corner 0000 to 1111, adding one axis per step in the
 // order of permutation s. Corner bits: 1 = x, 2 = y, 4 = z, 8 = t.
 struct KuhnTable {
@@ -99,6 +102,10 @@ struct PentatopeCase {
   int a[6] = {}, b[6] = {};  // crossing edges as hypercube corner pairs, a < b
   int lone[4] = {};          // 1|4 split: the tet
   int prism[12][3][4] = {};  // 2|3 split: the three tets of split 2 * rotation + choice (see prism_split)
+  // Per output tet, 3 bits a face (face k, opposite tet vertex k, at bit 5 + 3 k): the facet of the simplex it lies on
+  // (the simplex vertex none of its crossing edges touch), or kInsidePrism. LatticeFaces::code without the simplex.
+  std::uint32_t lone_facets = 0;
+  std::uint32_t prism_facets[12][3] = {};
 };
 
 struct CaseTable {
@@ -123,6 +130,7 @@ struct CaseTable {
       for (int q = 0; q < 4; ++q) set_edge(q, lone, others[q]);
       const int tet[4] = {0, 1, 2, 3};
       orient(mask, s, c, tet, c.lone);
+      c.lone_facets = facets(s, c, c.lone);
     } else {
       const int* pair = np == 2 ? P : N;
       const int* triple = np == 2 ? N : P;
@@ -136,8 +144,25 @@ struct CaseTable {
           int tet[4];
           for (int q = 0; q < 4; ++q) tet[q] = kPrismRotation[split / 2][kPrismSplit[split % 2][t][q]];
           orient(mask, s, c, tet, c.prism[split][t]);
+          c.prism_facets[split][t] = facets(s, c, c.prism[split][t]);
         }
     }
+  }
+
+  // PentatopeCase::lone_facets and prism_facets of the output tet `tet` (edge indices).
+  static std::uint32_t facets(int s, const PentatopeCase& c, const int tet[4]) {
+    const auto& cm = kKuhn.corner[std::size_t(s)];
+    std::uint32_t code = 0;
+    for (int k = 0; k < 4; ++k) {
+      unsigned touched = 0;
+      for (int j = 0; j < 4; ++j)
+        if (j != k) touched |= (1u << c.a[tet[j]]) | (1u << c.b[tet[j]]);
+      std::uint32_t facet = std::uint32_t(kInsidePrism);
+      for (int q = 0; q < 5; ++q)
+        if (!(touched & (1u << cm[std::size_t(q)]))) facet = std::uint32_t(q);
+      code |= facet << (5 + 3 * k);
+    }
+    return code;
   }
 
   // Writes tet (edge indices) to out, swapping two vertices when cross4 would point where d decreases.
@@ -240,15 +265,13 @@ inline int bit_count(std::uint32_t x) {
 
 }  // namespace
 
-namespace {
-
-// The facet code of a tet face inside its pentatope's prism (lattice_face_neighbours).
-constexpr int kInsidePrism = 7;
-
 // Written by hand (no library knows the Kuhn triangulation's facets). Every entry is written by one tet, so the
 // result does not depend on the thread count. (face_neighbours settles the same faces from the vertex stars: on
 // cow -> horse a little slower, on sphere -> bunny at 19.7 M tets 1.5 s against 0.2 s.)
-void lattice_face_from(const LatticeFaces& f, const TetIndices& T, int* across, std::size_t stride) {
+void lattice_face_neighbours(const LatticeFaces& f, const TetIndices& T, int* across, std::size_t stride) {
+  if (!f.known() || f.code.size() != std::size_t(T.rows()) || stride < 4)
+    throw InvalidInput("lattice_face_neighbours: " + std::to_string(f.code.size()) + " tets recorded for " +
+                       std::to_string(T.rows()) + ", stride " + std::to_string(stride));
   const std::vector<std::uint32_t>& code = f.code;
   const std::vector<std::uint64_t>& layout = f.layout;
   const std::vector<std::int64_t>& tet_offset = f.tet_offset;
@@ -322,15 +345,6 @@ void lattice_face_from(const LatticeFaces& f, const TetIndices& T, int* across, 
       }
     }
   });
-}
-
-}  // namespace
-
-void lattice_face_neighbours(const LatticeFaces& faces, const TetIndices& T, int* across, std::size_t stride) {
-  if (!faces.known() || faces.code.size() != std::size_t(T.rows()) || stride < 4)
-    throw InvalidInput("lattice_face_neighbours: " + std::to_string(faces.code.size()) + " tets recorded for " +
-                       std::to_string(T.rows()) + ", stride " + std::to_string(stride));
-  lattice_face_from(faces, T, across, stride);
 }
 
 FaceNeighbours lattice_face_neighbours(const LatticeFaces& faces, const TetIndices& T) {
@@ -564,30 +578,17 @@ ExtractResult extract_hypersurface(const MorphField& field, const ExtractOptions
       if (pc.edges == 0) continue;
       int ids[6];
       for (int e = 0; e < pc.edges; ++e) ids[e] = edge_id(pc.a[e], pc.b[e]);
-      auto emit = [&](const int tet[4]) {
+      auto emit = [&](const int tet[4], std::uint32_t facets) {
         mesh.T.row(row) << ids[tet[0]], ids[tet[1]], ids[tet[2]], ids[tet[3]];
         if (options.record_source_cells) mesh.source_cell[std::size_t(row)] = source_base + s;
-        if (options.face_neighbours) {
-          // The face opposite tet[k] lies on the facet opposite the simplex vertex none of its crossing edges touch.
-          std::uint32_t code = std::uint32_t(s);
-          for (int k = 0; k < 4; ++k) {
-            unsigned touched = 0;
-            for (int j = 0; j < 4; ++j)
-              if (j != k) touched |= (1u << pc.a[tet[j]]) | (1u << pc.b[tet[j]]);
-            std::uint32_t facet = std::uint32_t(kInsidePrism);
-            for (int q = 0; q < 5; ++q)
-              if (!(touched & (1u << cm[std::size_t(q)]))) facet = std::uint32_t(q);
-            code |= facet << (5 + 3 * k);
-          }
-          face_code[std::size_t(row)] = code;
-        }
+        if (options.face_neighbours) face_code[std::size_t(row)] = std::uint32_t(s) | facets;
         ++row;
       };
       if (pc.edges == 4) {
-        emit(pc.lone);
+        emit(pc.lone, pc.lone_facets);
       } else {
-        const auto& split = pc.prism[prism_split(ids)];
-        for (int t = 0; t < 3; ++t) emit(split[t]);
+        const int split = prism_split(ids);
+        for (int t = 0; t < 3; ++t) emit(pc.prism[split][t], pc.prism_facets[split][t]);
       }
     }
   });

@@ -233,11 +233,11 @@ TetRecords tet_records(const TetIndices& T, const VertexTets& stars, const Latti
   tbb::parallel_for(tbb::blocked_range<Eigen::Index>(0, T.rows()), [&](const tbb::blocked_range<Eigen::Index>& r) {
     for (Eigen::Index t = r.begin(); t != r.end(); ++t) {
       TetRecord& rec = out.records[std::size_t(t)];
-      for (int k = 0; k < 4; ++k) {
-        rec.v[k] = T(t, k);
+      for (int k = 0; k < 4; ++k) rec.v[k] = T(t, k);
+      if (lattice) continue;  // written below
+      for (int k = 0; k < 4; ++k)
         rec.across[k] =
             searched.known() ? searched.across[std::size_t(t) * 4 + std::size_t(k)] : FaceNeighbours::kManyTets;
-      }
     }
   });
   // Written straight into the records (no 16-byte-a-tet table beside them).
