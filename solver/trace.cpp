@@ -84,7 +84,7 @@ __attribute__((always_inline)) inline bool simplex_system(const TetMesh4& mesh, 
   // Hadamard: det <= product of the diagonal, with equality for orthogonal edges. Far below it the simplex is
   // flat, its weights have no gradient, and it is never entered.
   if (!(gram.determinant() > 1e-20 * scale)) return false;
-  x.G.setZero();
+  if (K < 3) x.G.setZero();  // a tet's three columns are all written
   x.G.leftCols(K) = E * gram.inverse();
   if (!kFlow) return x.G.allFinite();
   for (int j = 0; j <= K; ++j) x.T.col(j) = field.row(x.ids[std::size_t(j)]).transpose();
@@ -106,9 +106,9 @@ void set_variation(Simplex& x) {
   const int k = x.size - 1;
   double largest_gradient2 = 0.0, spread2 = 0.0;
   for (int j = 0; j < k; ++j) largest_gradient2 = std::max(largest_gradient2, x.G.col(j).squaredNorm());
-  for (int j = 0; j <= k; ++j) spread2 = std::max(spread2, (x.T.col(j) - x.T.col(0)).squaredNorm());
+  for (int j = 1; j <= k; ++j) spread2 = std::max(spread2, (x.T.col(j) - x.T.col(0)).squaredNorm());
   if (x.size == 4)
-    for (int j = 0; j <= k; ++j) spread2 = std::max(spread2, (x.N.col(j) - x.N.col(0)).squaredNorm());
+    for (int j = 1; j <= k; ++j) spread2 = std::max(spread2, (x.N.col(j) - x.N.col(0)).squaredNorm());
   x.variation = 2.0 * std::sqrt(largest_gradient2) * std::sqrt(spread2);
 }
 
@@ -312,7 +312,9 @@ class Tracer {
     for (int step = 0;; ++step) {
       if (on_a(ids, n)) return TraceStatus::Reached;
       if (step >= options_.max_steps) return TraceStatus::Stalled;
-      const std::array<int, 4> key = support_key(ids, n);
+      // Only a support of one or two vertices is compared; a larger one gets a key no such support has (sorting it
+      // was 2% of the tracer's instructions).
+      const std::array<int, 4> key = n < 3 ? support_key(ids, n) : kLargeSupport;
       if (n < 3 && key == before_last) return TraceStatus::Stalled;
       if (step % options_.progress_window == 0) {
         double s_now = 0.0;
@@ -331,6 +333,8 @@ class Tracer {
       if (!take_support(piece, pw, ids, w, n)) return TraceStatus::Stalled;
     }
   }
+
+  static constexpr std::array<int, 4> kLargeSupport{{-3, -3, -3, -3}};  // see follow()
 
   static std::array<int, 4> support_key(const std::array<int, 4>& ids, int n) {
     // A fixed trip count: a loop to n was a call to memcpy a piece.
@@ -378,13 +382,16 @@ class Tracer {
   bool integrate(const Simplex& x, Weights& pw, const Weights& rate, Stats& stats) const {
     constexpr int stagnation_substeps = 8;
     const int m = x.size;
-    double s_checkpoint = s_at(x, pw);
+    // s where the piece starts, read only if it runs to stagnation_substeps steps (few do): kept as its weights.
+    const Weights start = pw;
+    double s_checkpoint = std::numeric_limits<double>::quiet_NaN();
     // Weights that start at zero enter (choose() demands a positive rate), so they are not taken as leaving
     // while they are still zero; a step too long for one of them to become positive is halved.
     std::array<bool, 4> pinned{{false, false, false, false}};
     for (int j = 0; j < m; ++j) pinned[std::size_t(j)] = pw(j) <= options_.weight_epsilon;
     for (int sub = 0; sub < 64; ++sub) {
       if (sub > 0 && sub % stagnation_substeps == 0) {
+        if (sub == stagnation_substeps) s_checkpoint = s_at(x, start);
         const double s_now = s_at(x, pw);
         if (!(s_now < s_checkpoint - options_.progress)) return false;
         s_checkpoint = s_now;
@@ -480,8 +487,9 @@ class Tracer {
       if (k < 4 && tets_.known) {
         const int other = from.across[k];
         if (other != FaceNeighbours::kManyTets) {
+          if (other >= 0 && other < from_tet) out.push_back(other);
           out.push_back(from_tet);
-          if (other >= 0) out.insert(other < from_tet ? out.begin() : out.end(), other);
+          if (other > from_tet) out.push_back(other);
           return;
         }
       }
