@@ -48,11 +48,12 @@ struct Simplex {
 // that leaves one through the face enters the other (orthogonal projections of a bent star disagree near the
 // face, and sliver tets, whose spans are far from the manifold's tangent space, would bend every trace through
 // them). Where N lies nearly in the tet's span (a fold) the orthogonal projection is used.
-Weights rates(const Simplex& x, const Weights& w) {
-  const int k = x.size - 1;
+// K = x.size - 1 as a constant: the tets' evaluations (nearly all) run unrolled.
+template <int K>
+Weights rates_of(const Simplex& x, const Weights& w) {
   // The fixed-size product: T's columns beyond x.size are zero, and a block of run-time width is not unrolled.
   Eigen::Vector4d v = -(x.T * w);
-  if (x.size == 4) {
+  if (K == 3) {
     const Eigen::Vector4d n = x.N * w;
     const double along = x.normal.dot(n);
     // |along| > 0.2 |normal| |n|, squared: no square root in the evaluation.
@@ -60,12 +61,25 @@ Weights rates(const Simplex& x, const Weights& w) {
   }
   Weights r = Weights::Zero();
   double sum = 0.0;
-  for (int i = 0; i < k; ++i) {
+  for (int i = 0; i < K; ++i) {
     r(i + 1) = x.G.col(i).dot(v);
     sum += r(i + 1);
   }
   r(0) = -sum;
   return r;
+}
+
+Weights rates(const Simplex& x, const Weights& w) {
+  switch (x.size) {
+    case 4:
+      return rates_of<3>(x, w);
+    case 3:
+      return rates_of<2>(x, w);
+    case 2:
+      return rates_of<1>(x, w);
+    default:
+      return rates_of<0>(x, w);
+  }
 }
 
 // Forced inline: out of line (once choose() and descend() shared the simplex enumeration) it cost cow -> horse's
