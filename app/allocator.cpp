@@ -1,4 +1,5 @@
-// Allocator settings of the morphmap process (see allocator.h for the measurement behind them).
+// Start-up settings of the morphmap process: the allocator's tunables and OpenBLAS's spin (see allocator.h for the
+// measurements behind them).
 #include "app/allocator.h"
 
 #include <unistd.h>
@@ -13,19 +14,34 @@ const char* const kAllocatorTunables =
     "glibc.malloc.hugetlb=1:glibc.malloc.trim_threshold=4294967295:glibc.malloc.top_pad=268435456:"
     "glibc.malloc.mmap_threshold=33554432";
 
-std::string allocator_tunables() {
-  const char* value = std::getenv("GLIBC_TUNABLES");
+const char* const kBlasThreadTimeout = "20";
+
+namespace {
+
+std::string environment(const char* name) {
+  const char* value = std::getenv(name);
   return value != nullptr ? value : "";
 }
 
-bool set_allocator_tunables(std::string& previous) {
+}  // namespace
+
+std::string allocator_tunables() { return environment("GLIBC_TUNABLES"); }
+
+std::string blas_thread_timeout() { return environment("OPENBLAS_THREAD_TIMEOUT"); }
+
+bool set_startup_environment(std::string& previous) {
   previous = allocator_tunables();
   const char* opt_out = std::getenv("MORPHMAP_NO_ALLOCATOR_TUNING");
   if (opt_out != nullptr && std::strcmp(opt_out, "0") != 0) return false;
+  bool changed = false;
   // Already set (by us before, or by the user): never append twice.
-  if (previous.find("glibc.malloc.hugetlb") != std::string::npos) return false;
-  const std::string tunables = previous.empty() ? kAllocatorTunables : previous + ":" + kAllocatorTunables;
-  return ::setenv("GLIBC_TUNABLES", tunables.c_str(), 1) == 0;
+  if (previous.find("glibc.malloc.hugetlb") == std::string::npos) {
+    const std::string tunables = previous.empty() ? kAllocatorTunables : previous + ":" + kAllocatorTunables;
+    changed = ::setenv("GLIBC_TUNABLES", tunables.c_str(), 1) == 0;
+  }
+  if (std::getenv("OPENBLAS_THREAD_TIMEOUT") == nullptr)
+    changed = ::setenv("OPENBLAS_THREAD_TIMEOUT", kBlasThreadTimeout, 1) == 0 || changed;
+  return changed;
 }
 
 std::string executable_path() {
@@ -35,11 +51,11 @@ std::string executable_path() {
                                                       : std::string();  // not truncated
 }
 
-void tune_allocator(char** argv) {
+void tune_startup(char** argv) {
   const std::string self = executable_path();
   if (self.empty()) return;
   std::string previous;
-  if (!set_allocator_tunables(previous)) return;
+  if (!set_startup_environment(previous)) return;
   ::execv(self.c_str(), argv);
   // Only reached when execv failed: run on with the defaults, and leave the environment as it was.
   if (previous.empty())

@@ -16,7 +16,7 @@
 using morphmap::PipelineOptions;
 
 int main(int argc, char** argv) {
-  morphmap::tune_allocator(argv);
+  morphmap::tune_startup(argv);
   CLI::App app{"morphmap: dense correspondence and texture transfer through a 4D implicit morph"};
   app.require_subcommand(1);
   PipelineOptions options;

@@ -1299,7 +1299,7 @@ PipelineResult run_pipeline(const PipelineOptions& options) {
   report["memory_estimate_bytes"] = memory_estimate;
   // The allocator settings change the run time by a third on our machines (app/allocator.h), so every report says
   // which were in force.
-  report["allocator"] = {{"glibc_tunables", allocator_tunables()}};
+  report["allocator"] = {{"glibc_tunables", allocator_tunables()}, {"openblas_thread_timeout", blas_thread_timeout()}};
   result.report_json = report.dump(2);
   if (out) {
     write_text_atomically(out->staged("report.json"), result.report_json + "\n");

@@ -158,13 +158,18 @@ TEST_F(Cli, TargetMeshGetsALabelPerVertexWithEveryMethod) {
 }
 
 TEST_F(Cli, AllocatorTunablesAreSetOnceAndCanBeRefused) {
-  // The binary re-executes itself with its glibc tunables (app/allocator.h); report.json says what was in force.
-  auto tunables = [&](const std::string& env, const std::string& name) {
+  // The binary re-executes itself with its glibc tunables and OpenBLAS's thread timeout (app/allocator.h);
+  // report.json says what was in force.
+  auto allocator = [&](const std::string& env, const std::string& name) {
     const fs::path out = dir_ / name;
-    const std::string command = "env -u GLIBC_TUNABLES -u MORPHMAP_NO_ALLOCATOR_TUNING " + env + " " + MORPHMAP_BINARY +
-                                " map sphere torus --voxels 10 --time-steps 4 -o " + out.string() + " 2>&1";
+    const std::string command = "env -u GLIBC_TUNABLES -u MORPHMAP_NO_ALLOCATOR_TUNING -u OPENBLAS_THREAD_TIMEOUT " +
+                                env + " " + MORPHMAP_BINARY + " map sphere torus --voxels 10 --time-steps 4 -o " +
+                                out.string() + " 2>&1";
     EXPECT_EQ(std::system(command.c_str()), 0) << command;
-    return nlohmann::json::parse(std::ifstream(out / "report.json"))["allocator"]["glibc_tunables"].get<std::string>();
+    return nlohmann::json::parse(std::ifstream(out / "report.json"))["allocator"];
+  };
+  auto tunables = [&](const std::string& env, const std::string& name) {
+    return allocator(env, name)["glibc_tunables"].get<std::string>();
   };
   const std::string ours = tunables("", "default");
   EXPECT_EQ(ours.find("glibc.malloc.hugetlb=1"), 0u) << ours;
@@ -173,6 +178,14 @@ TEST_F(Cli, AllocatorTunablesAreSetOnceAndCanBeRefused) {
   // The user's own tunables are kept in front of ours; a user who sets hugetlb decides alone.
   EXPECT_EQ(tunables("GLIBC_TUNABLES=glibc.malloc.arena_max=2", "appended"), "glibc.malloc.arena_max=2:" + ours);
   EXPECT_EQ(tunables("GLIBC_TUNABLES=glibc.malloc.hugetlb=0", "user"), "glibc.malloc.hugetlb=0");
+  // OpenBLAS's spin: ours unless the user set one, also where the user's hugetlb leaves the tunables alone.
+  auto timeout = [&](const std::string& env, const std::string& name) {
+    return allocator(env, name)["openblas_thread_timeout"].get<std::string>();
+  };
+  EXPECT_EQ(timeout("", "timeout-default"), "20");
+  EXPECT_EQ(timeout("OPENBLAS_THREAD_TIMEOUT=12", "timeout-user"), "12");
+  EXPECT_EQ(timeout("GLIBC_TUNABLES=glibc.malloc.hugetlb=0", "timeout-user-tunables"), "20");
+  EXPECT_EQ(timeout("MORPHMAP_NO_ALLOCATOR_TUNING=1", "timeout-refused"), "");
 }
 
 TEST_F(Cli, TopologyTheLatticeChangesIsReported) {
