@@ -53,7 +53,7 @@ template <int K>
 Weights rates_of(const Simplex& x, const Weights& w) {
   // The fixed-size product: T's columns beyond x.size are zero, and a block of run-time width is not unrolled.
   Eigen::Vector4d v = -(x.T * w);
-  if (K == 3) {
+  if constexpr (K == 3) {
     const Eigen::Vector4d n = x.N * w;
     const double along = x.normal.dot(n);
     // |along| > 0.2 |normal| |n|, squared: no square root in the evaluation.
@@ -98,11 +98,11 @@ __attribute__((always_inline)) inline bool simplex_system(const TetMesh4& mesh, 
   // Hadamard: det <= product of the diagonal, with equality for orthogonal edges. Far below it the simplex is
   // flat, its weights have no gradient, and it is never entered.
   if (!(gram.determinant() > 1e-20 * scale)) return false;
-  if (K < 3) x.G.setZero();  // a tet's three columns are all written
+  if constexpr (K < 3) x.G.setZero();  // a tet's three columns are all written
   x.G.leftCols(K) = E * gram.inverse();
   if (!kFlow) return x.G.allFinite();
   for (int j = 0; j <= K; ++j) x.T.col(j) = field.row(x.ids[std::size_t(j)]).transpose();
-  if (K == 3) {
+  if constexpr (K == 3) {
     x.normal = cross4(E.col(0), E.col(1), E.col(2));
     x.normal_norm2 = x.normal.squaredNorm();
     for (int j = 0; j <= K; ++j) x.N.col(j) = normals.row(x.ids[std::size_t(j)]).transpose();
