@@ -41,12 +41,18 @@ const MeshCase& cow_horse() {
   return *c;
 }
 
-void BM_AdjacencyStars(benchmark::State& state) {
+// cow_horse(), or nullptr with the benchmark skipped when its models are missing.
+const MeshCase* case_or_skip(benchmark::State& state) {
   const MeshCase& c = cow_horse();
-  if (!c.error.empty()) {
-    state.SkipWithError(c.error.c_str());
-    return;
-  }
+  if (c.error.empty()) return &c;
+  state.SkipWithError(c.error.c_str());
+  return nullptr;
+}
+
+void BM_AdjacencyStars(benchmark::State& state) {
+  const MeshCase* found = case_or_skip(state);
+  if (found == nullptr) return;
+  const MeshCase& c = *found;
   for (auto _ : state) {
     const morphmap::VertexTets stars = morphmap::build_vertex_tets(c.mesh.T, c.mesh.vertex_count());
     benchmark::DoNotOptimize(stars.tets.data());
@@ -55,11 +61,9 @@ void BM_AdjacencyStars(benchmark::State& state) {
 }
 
 void BM_AdjacencyFaceNeighbours(benchmark::State& state) {
-  const MeshCase& c = cow_horse();
-  if (!c.error.empty()) {
-    state.SkipWithError(c.error.c_str());
-    return;
-  }
+  const MeshCase* found = case_or_skip(state);
+  if (found == nullptr) return;
+  const MeshCase& c = *found;
   const morphmap::VertexTets stars = morphmap::build_vertex_tets(c.mesh.T, c.mesh.vertex_count());
   for (auto _ : state) {
     const morphmap::FaceNeighbours across = morphmap::face_neighbours(c.mesh.T, stars);
@@ -70,11 +74,9 @@ void BM_AdjacencyFaceNeighbours(benchmark::State& state) {
 
 // The same neighbours from the extraction's lattice record (what the pipeline's tracer uses).
 void BM_AdjacencyLatticeFaceNeighbours(benchmark::State& state) {
-  const MeshCase& c = cow_horse();
-  if (!c.error.empty()) {
-    state.SkipWithError(c.error.c_str());
-    return;
-  }
+  const MeshCase* found = case_or_skip(state);
+  if (found == nullptr) return;
+  const MeshCase& c = *found;
   for (auto _ : state) {
     const morphmap::FaceNeighbours across = morphmap::lattice_face_neighbours(c.faces, c.mesh.T);
     benchmark::DoNotOptimize(across.across.get());

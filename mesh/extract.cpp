@@ -291,13 +291,12 @@ void lattice_face_neighbours(const LatticeFaces& f, const TetIndices& T, int* ac
       const std::int64_t cube = candidates[std::size_t(ordinal)];
       const std::int64_t at[3] = {cube % f.cx, (cube / f.cx) % f.cy, cube / (f.cx * f.cy)};
       const std::int64_t extent[3] = {f.cx, f.cy, f.cz}, cube_stride[3] = {1, f.cx, f.cx * f.cy};
-      // The cell one step along axis (direction +-1), as its slot; -1 outside the lattice or where d does not change
-      // sign over the cube.
-      auto step = [&](int axis, int direction) -> std::int64_t {
-        if (axis == 3) return level + direction < 0 || level + direction >= K ? -1 : slot + direction;
-        const std::int64_t moved = at[axis] + direction;
-        if (moved < 0 || moved >= extent[axis]) return -1;
-        const std::int32_t next = cube_ordinal[std::size_t(cube + direction * cube_stride[axis])];
+      // The cell one step up along axis, as its slot; -1 outside the lattice or where d does not change sign over
+      // the cube.
+      auto next_cell = [&](int axis) -> std::int64_t {
+        if (axis == 3) return level + 1 >= K ? -1 : slot + 1;
+        if (at[axis] + 1 >= extent[axis]) return -1;
+        const std::int32_t next = cube_ordinal[std::size_t(cube + cube_stride[axis])];
         return next < 0 ? -1 : std::int64_t(next) * K + level;
       };
       for (std::int64_t t = tet_offset[std::size_t(slot)]; t < tet_offset[std::size_t(slot) + 1]; ++t) {
@@ -313,7 +312,7 @@ void lattice_face_neighbours(const LatticeFaces& f, const TetIndices& T, int* ac
           if (q < 5) {
             simplex = kKuhn.across(s, q);
             if (q != 0 && simplex < s) continue;
-            if (q == 0) where = step(kKuhn.axis[std::size_t(s)][0], 1);
+            if (q == 0) where = next_cell(kKuhn.axis[std::size_t(s)][0]);
           }
           if (where < 0) continue;
           int face[3], m = 0;
